@@ -1,0 +1,89 @@
+// cutsim run PROG.nc: simulate and write OUTDIR/<stem>.glb and .report.json.
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+
+#include "commands.h"
+#include "cutsim/core/error.h"
+#include "cutsim/io/atomic_file.h"
+#include "cutsim/io/gltf_writer.h"
+#include "cutsim/io/job.h"
+#include "cutsim/sim/report.h"
+#include "cutsim/sim/simulate.h"
+
+namespace cutsim::app {
+
+namespace fs = std::filesystem;
+
+namespace {
+struct RunArgs {
+  std::string program;
+  std::string job;
+  std::string outdir = ".";
+  double voxel = 0;
+  std::string format = "text";
+  std::string stock_box;
+  std::string tool;
+};
+}  // namespace
+
+Action add_run_command(CLI::App& app) {
+  auto args = std::make_shared<RunArgs>();
+  CLI::App* cmd = app.add_subcommand("run", "simulate a program and write the machined stock (.glb) and a report (.json)");
+  cmd->add_option("program", args->program, "NC program (G-code)")->required();
+  cmd->add_option("--job", args->job, "job file (TOML); default: <program stem>.toml beside the program, if present");
+  cmd->add_option("-o,--output", args->outdir, "output directory (created if missing)");
+  cmd->add_option("--voxel", args->voxel, "voxel size, mm")->check(CLI::PositiveNumber);
+  cmd->add_option("--format", args->format, "console output: text or json")->check(CLI::IsMember({"text", "json"}));
+  cmd->add_option("--stock-box", args->stock_box, "stock box XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX in mm");
+  cmd->add_option("--tool", args->tool, "tool spec: ball:d=1, flat:d=6[,l=12], bull:d=2,r=0.2");
+
+  return [args]() -> int {
+    const auto t0 = std::chrono::steady_clock::now();
+    sim::SimOptions opt;
+    opt.program = args->program;
+    if (!fs::exists(opt.program)) throw InputError(opt.program, "no such file");
+    if (fs::is_directory(opt.program)) throw InputError(opt.program, "is a directory, not a program");
+    std::string job_path = args->job;
+    if (job_path.empty()) {
+      fs::path beside = fs::path(opt.program).replace_extension(".toml");
+      if (fs::exists(beside)) job_path = beside.string();
+    }
+    if (!job_path.empty()) opt.job = io::load_job(job_path);
+    if (!args->stock_box.empty()) opt.stock_box = io::parse_box(args->stock_box, "--stock-box");
+    if (!args->tool.empty()) opt.tool = tool::parse_tool_spec(args->tool, "--tool");
+    if (args->voxel > 0) opt.voxel_mm = args->voxel;
+    io::ensure_writable_directory(args->outdir);
+
+    ProgressBar bar;
+    opt.progress = [&bar](double f, int line) { bar.update(f, line); };
+    sim::SimResult res = sim::simulate(opt);
+    bar.finish();
+
+    const std::string stem = fs::path(opt.program).stem().string();
+    sim::ReportOutputs out;
+    out.glb = (fs::path(args->outdir) / (stem + ".glb")).string();
+    out.report = (fs::path(args->outdir) / (stem + ".report.json")).string();
+
+    const auto t_exp = std::chrono::steady_clock::now();
+    const TriMesh mesh = res.stock->surface_mesh();
+    io::write_glb(out.glb, {io::GltfPart{"machined_stock", &mesh, {0.75f, 0.75f, 0.78f, 1.0f}}});
+    res.timing.export_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_exp).count();
+    res.timing.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const std::string json = sim::report_json(res, out);
+    try {
+      io::write_file_atomic(out.report, json);
+    } catch (...) {
+      std::error_code ec;
+      fs::remove(out.glb, ec);  // no half a result
+      throw;
+    }
+    if (args->format == "json") std::cout << json;
+    else std::cout << sim::report_text(res, out);
+    return 0;
+  };
+}
+
+}  // namespace cutsim::app

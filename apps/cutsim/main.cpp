@@ -1,0 +1,41 @@
+// cutsim: a cutting simulator for ultra-precision machining.
+#include <cstdio>
+#include <iostream>
+
+#include "commands.h"
+#include "cutsim/core/error.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"cutsim: simulate an NC program's cuts in a voxel stock"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "cutsim 0.1.0");
+  cutsim::app::Action run = cutsim::app::add_run_command(app);
+  cutsim::app::Action check = cutsim::app::add_check_command(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "cutsim: error: " << e.what() << "\n" << "run 'cutsim --help' for usage\n";
+    return static_cast<int>(cutsim::ExitCode::usage);
+  }
+  try {
+    if (app.got_subcommand("run")) return run();
+    if (app.got_subcommand("check")) return check();
+  } catch (const cutsim::Error& e) {
+    std::cout.flush();
+    std::cerr << e.format() << "\n";
+    return static_cast<int>(e.code());
+  } catch (const std::bad_alloc&) {
+    std::cerr << "cutsim: error: out of memory (try a coarser --voxel)\n";
+    return static_cast<int>(cutsim::ExitCode::software);
+  } catch (const std::exception& e) {
+    std::cerr << "cutsim: internal error: " << e.what() << "\n";
+    return static_cast<int>(cutsim::ExitCode::software);
+  }
+  return static_cast<int>(cutsim::ExitCode::usage);
+}

@@ -1,0 +1,30 @@
+#pragma once
+// Binary glTF (.glb) export. glTF is metres and Y-up: a root node turns the
+// Z-up machine frame into it; each mesh stores float positions relative to a
+// local origin held by its node in double precision.
+#include <array>
+#include <string>
+#include <vector>
+
+#include "cutsim/core/mesh.h"
+
+namespace cutsim::io {
+
+struct GltfPart {
+  std::string name;
+  const TriMesh* mesh = nullptr;
+  std::array<float, 4> base_color{0.75f, 0.75f, 0.78f, 1.0f};  ///< linear RGBA
+};
+
+struct GltfOptions {
+  std::string generator = "cutsim";
+};
+
+/// Serialises the parts to .glb bytes. Parts with no triangles are skipped.
+std::string glb_bytes(const std::vector<GltfPart>& parts, const GltfOptions& opt = {});
+
+/// Writes the parts to `path` atomically.
+/// @throw OutputError when the file cannot be written.
+void write_glb(const std::string& path, const std::vector<GltfPart>& parts, const GltfOptions& opt = {});
+
+}  // namespace cutsim::io

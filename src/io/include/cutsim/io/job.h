@@ -1,0 +1,30 @@
+#pragma once
+// The job file (TOML): stock, tool and simulation settings for a program.
+// Every field is optional; the command line overrides the file.
+#include <optional>
+#include <string>
+
+#include "cutsim/core/geometry.h"
+#include "cutsim/tool/tool.h"
+
+namespace cutsim::io {
+
+struct Job {
+  std::string source;                ///< job file path, empty if none
+  std::optional<Aabb> stock_box;     ///< [stock] box = [xmin,ymin,zmin,xmax,ymax,zmax], mm
+  std::optional<tool::Tool> tool;    ///< [tool] spec = "ball:d=1"
+  std::optional<double> voxel_mm;    ///< [simulation] voxel_mm
+  std::optional<Vec3> start_mm;      ///< [simulation] start = [x,y,z], tool tip at program start
+  std::optional<double> memory_limit_mb;  ///< [simulation] memory_limit_mb
+};
+
+/// Reads a job file.
+/// @throw InputError if it cannot be read; ConfigError with file:line:col for
+///        a TOML syntax error, an unknown key, or a value of the wrong type.
+Job load_job(const std::string& path);
+
+/// Parses `XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX` (mm).
+/// @throw ConfigError naming `origin` when malformed or empty.
+Aabb parse_box(const std::string& text, const std::string& origin);
+
+}  // namespace cutsim::io

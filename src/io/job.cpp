@@ -1,0 +1,130 @@
+#include "cutsim/io/job.h"
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include <toml++/toml.h>
+
+#include "cutsim/core/error.h"
+
+namespace cutsim::io {
+
+namespace {
+
+std::string line_of(const std::string& text, int line) {
+  std::istringstream is(text);
+  std::string s;
+  for (int i = 0; i < line && std::getline(is, s); ++i) {}
+  return s;
+}
+
+struct Ctx {
+  std::string path, text;
+  [[noreturn]] void fail(const toml::source_region& r, const std::string& msg) const {
+    const int line = static_cast<int>(r.begin.line), col = static_cast<int>(r.begin.column);
+    throw ConfigError(SourceLocation{path, line, col, line_of(text, line)}, msg);
+  }
+  void only_keys(const toml::table& t, const std::set<std::string>& keys, const std::string& where) const {
+    for (const auto& [k, v] : t)
+      if (!keys.count(std::string(k.str())))
+        fail(k.source(), "unknown key '" + std::string(k.str()) + "' in " + where);
+  }
+  double number(const toml::node& n, const std::string& what) const {
+    if (auto v = n.value<double>()) {
+      if (!std::isfinite(*v)) fail(n.source(), what + " must be finite");
+      return *v;
+    }
+    fail(n.source(), what + " must be a number");
+  }
+  Vec3 vec3(const toml::node& n, const std::string& what) const {
+    const auto* a = n.as_array();
+    if (!a || a->size() != 3) fail(n.source(), what + " must be an array of 3 numbers");
+    return Vec3(number(*a->get(0), what), number(*a->get(1), what), number(*a->get(2), what));
+  }
+};
+
+}  // namespace
+
+Aabb parse_box(const std::string& text, const std::string& origin) {
+  std::vector<double> v;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    char* end = nullptr;
+    const double d = std::strtod(item.c_str(), &end);
+    if (item.empty() || *end != '\0' || !std::isfinite(d))
+      throw ConfigError(SourceLocation{origin, 0, 0, {}}, "stock box: '" + item + "' is not a number");
+    v.push_back(d);
+  }
+  if (v.size() != 6)
+    throw ConfigError(SourceLocation{origin, 0, 0, {}}, "stock box needs 6 numbers XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX");
+  Aabb b{Vec3(v[0], v[1], v[2]), Vec3(v[3], v[4], v[5])};
+  if ((b.max.array() <= b.min.array()).any())
+    throw ConfigError(SourceLocation{origin, 0, 0, {}}, "stock box: each max must exceed its min");
+  return b;
+}
+
+Job load_job(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path, "cannot open job file");
+  std::stringstream buf;
+  buf << in.rdbuf();
+  Ctx ctx{path, buf.str()};
+  toml::table root;
+  try {
+    root = toml::parse(ctx.text, path);
+  } catch (const toml::parse_error& e) {
+    ctx.fail(e.source(), std::string(e.description()));
+  }
+  Job job;
+  job.source = path;
+  ctx.only_keys(root, {"stock", "tool", "simulation"}, "the job");
+  if (auto* st = root["stock"].as_table()) {
+    ctx.only_keys(*st, {"box"}, "[stock]");
+    if (auto* b = st->get("box")) {
+      const auto* a = b->as_array();
+      if (!a || a->size() != 6) ctx.fail(b->source(), "[stock] box must be [xmin, ymin, zmin, xmax, ymax, zmax]");
+      double v[6];
+      for (int i = 0; i < 6; ++i) v[i] = ctx.number(*a->get(static_cast<std::size_t>(i)), "[stock] box");
+      Aabb box{Vec3(v[0], v[1], v[2]), Vec3(v[3], v[4], v[5])};
+      if ((box.max.array() <= box.min.array()).any()) ctx.fail(b->source(), "[stock] box: each max must exceed its min");
+      job.stock_box = box;
+    }
+  } else if (root.contains("stock")) {
+    ctx.fail(root.get("stock")->source(), "[stock] must be a table");
+  }
+  if (auto* t = root["tool"].as_table()) {
+    ctx.only_keys(*t, {"spec"}, "[tool]");
+    if (auto* s = t->get("spec")) {
+      const auto v = s->value<std::string>();
+      if (!v) ctx.fail(s->source(), "[tool] spec must be a string such as \"ball:d=1\"");
+      try {
+        job.tool = tool::parse_tool_spec(*v, path);
+      } catch (const ConfigError& e) {
+        ctx.fail(s->source(), e.message());
+      }
+    }
+  } else if (root.contains("tool")) {
+    ctx.fail(root.get("tool")->source(), "[tool] must be a table");
+  }
+  if (auto* s = root["simulation"].as_table()) {
+    ctx.only_keys(*s, {"voxel_mm", "start", "memory_limit_mb"}, "[simulation]");
+    if (auto* v = s->get("voxel_mm")) {
+      job.voxel_mm = ctx.number(*v, "voxel_mm");
+      if (!(*job.voxel_mm > 0)) ctx.fail(v->source(), "voxel_mm must be positive");
+    }
+    if (auto* v = s->get("start")) job.start_mm = ctx.vec3(*v, "start");
+    if (auto* v = s->get("memory_limit_mb")) {
+      job.memory_limit_mb = ctx.number(*v, "memory_limit_mb");
+      if (!(*job.memory_limit_mb > 0)) ctx.fail(v->source(), "memory_limit_mb must be positive");
+    }
+  } else if (root.contains("simulation")) {
+    ctx.fail(root.get("simulation")->source(), "[simulation] must be a table");
+  }
+  return job;
+}
+
+}  // namespace cutsim::io

@@ -1,0 +1,51 @@
+#pragma once
+// A resolved move in the workpiece frame: mm and radians inside, with the NC
+// line that caused it.
+#include <array>
+#include <memory>
+#include <string>
+
+#include "cutsim/core/geometry.h"
+
+namespace cutsim::motion {
+
+enum class MotionKind { rapid, linear, arc_cw, arc_ccw };
+
+/// "G0", "G1", "G2" or "G3".
+const char* motion_name(MotionKind k);
+
+/// Machine axis values: X, Y, Z in mm; A, B, C in radians.
+struct AxisValues {
+  Vec3 xyz = Vec3::Zero();
+  Vec3 abc = Vec3::Zero();
+};
+
+struct Move {
+  int line = 0;                       ///< 1-based NC line
+  std::shared_ptr<const std::string> text;  ///< the NC line as written
+  MotionKind kind = MotionKind::linear;
+  AxisValues start, end;
+  // Arcs only:
+  Vec3 centre = Vec3::Zero();  ///< arc centre, in the arc plane at the start's height
+  int plane_axis = 2;          ///< axis normal to the arc plane: 2 (G17), 1 (G18), 0 (G19)
+  int turns = 1;               ///< full turns for P>1 (1 = the ordinary arc)
+  double feed_mm_per_min = 0;  ///< 0 for rapids
+  int tool = 0;                ///< T number in the spindle
+
+  bool is_arc() const { return kind == MotionKind::arc_cw || kind == MotionKind::arc_ccw; }
+  bool is_cutting_feed() const { return kind != MotionKind::rapid; }
+
+  /// Signed sweep angle of an arc in radians about +plane axis (negative
+  /// for clockwise), including extra turns; a full circle is +-2 pi.
+  double arc_sweep_angle() const;
+  /// Arc radius at the start and at the end (they may differ slightly).
+  double arc_start_radius() const;
+  double arc_end_radius() const;
+  /// Point on the path at parameter t in [0,1] (arcs: angle and radius
+  /// interpolated linearly, the axis normal to the plane linearly: helix).
+  Vec3 point_at(double t) const;
+  /// Bounding box of the tool control point over the whole move.
+  Aabb path_bounds() const;
+};
+
+}  // namespace cutsim::motion

@@ -1,0 +1,24 @@
+#pragma once
+// The run report (JSON) and its console summary.
+#include <string>
+
+#include "cutsim/sim/simulate.h"
+
+namespace cutsim::sim {
+
+struct ReportOutputs {
+  std::string glb;     ///< path written, empty if none
+  std::string report;  ///< path of the report itself
+};
+
+/// The report as JSON text. Fields: program, blocks, lines, moves,
+/// cutting_moves, tool, stock_box_mm, roi_mm, voxel_size_mm,
+/// stock_volume_before_mm3, stock_volume_after_mm3, removed_volume_mm3,
+/// active_voxels, leaf_nodes, warnings, defaults, outputs, timing_s
+/// {parse, simulate, export, total}, peak_rss_mb.
+std::string report_json(const SimResult& r, const ReportOutputs& out);
+
+/// A short human summary (several lines).
+std::string report_text(const SimResult& r, const ReportOutputs& out);
+
+}  // namespace cutsim::sim

@@ -1,0 +1,73 @@
+#pragma once
+// The pipeline: program -> blocks -> moves -> sweeps -> stock, in two
+// streaming passes (plan the region of interest, then cut).
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cutsim/core/geometry.h"
+#include "cutsim/core/mesh.h"
+#include "cutsim/io/job.h"
+#include "cutsim/motion/interpreter.h"
+#include "cutsim/stock/stock.h"
+#include "cutsim/tool/tool.h"
+
+namespace cutsim::sim {
+
+struct SimOptions {
+  std::string program;          ///< NC program path
+  io::Job job;                  ///< settings from the job file, overridden below
+  std::optional<Aabb> stock_box;     ///< --stock-box
+  std::optional<tool::Tool> tool;    ///< --tool
+  std::optional<double> voxel_mm;    ///< --voxel
+  /// Called with the fraction done (0..1) and the NC line being cut.
+  std::function<void(double, int)> progress;
+};
+
+/// What was chosen because nothing said otherwise (printed for the user).
+struct Defaults {
+  std::vector<std::string> notes;
+};
+
+struct Timing {
+  double parse_s = 0, simulate_s = 0, export_s = 0, total_s = 0;
+};
+
+struct SimResult {
+  std::string program;
+  int blocks = 0;        ///< blocks with words
+  int lines = 0;         ///< physical lines read
+  int moves = 0;         ///< all moves
+  int cutting_moves = 0; ///< G1/G2/G3 moves
+  tool::Tool tool;
+  Aabb stock_box;
+  double voxel_mm = 0;
+  Defaults defaults;
+  std::vector<motion::Warning> warnings;
+  std::unique_ptr<stock::Stock> stock;
+  Timing timing;
+};
+
+/// Runs the whole simulation.
+/// @throw cutsim::Error subclasses (parse, config, input, geometry).
+SimResult simulate(const SimOptions& opt);
+
+/// The program checked and interpreted, without simulating.
+struct CheckResult {
+  int blocks = 0;
+  int lines = 0;
+  int moves = 0;
+  std::vector<motion::Warning> warnings;
+};
+
+/// Interprets the program; calls `on_move` for each move if given.
+/// @throw cutsim::Error subclasses.
+CheckResult check_program(const std::string& program, const motion::InterpreterOptions& iopt,
+                          const std::function<void(const motion::Move&)>& on_move = {});
+
+/// Peak resident set size of this process, MiB.
+double peak_rss_mb();
+
+}  // namespace cutsim::sim

@@ -1,0 +1,65 @@
+#include "cutsim/sim/report.h"
+
+#include <cstdio>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+namespace cutsim::sim {
+
+namespace {
+nlohmann::json box_json(const Aabb& b) {
+  return {b.min.x(), b.min.y(), b.min.z(), b.max.x(), b.max.y(), b.max.z()};
+}
+}  // namespace
+
+std::string report_json(const SimResult& r, const ReportOutputs& out) {
+  nlohmann::ordered_json j;
+  const auto st = r.stock->stats();
+  j["program"] = r.program;
+  j["blocks"] = r.blocks;
+  j["lines"] = r.lines;
+  j["moves"] = r.moves;
+  j["cutting_moves"] = r.cutting_moves;
+  j["tool"] = {{"spec", r.tool.name}, {"diameter_mm", r.tool.diameter_mm},
+               {"corner_radius_mm", r.tool.corner_radius_mm}, {"flute_length_mm", r.tool.flute_length_mm},
+               {"control_point", "tool tip on the axis"}};
+  j["stock_box_mm"] = box_json(r.stock_box);
+  j["roi_mm"] = box_json(r.stock->roi());
+  j["voxel_size_mm"] = r.voxel_mm;
+  j["stock_volume_before_mm3"] = r.stock->initial_volume_mm3();
+  j["stock_volume_after_mm3"] = r.stock->volume_mm3();
+  j["removed_volume_mm3"] = r.stock->removed_volume_mm3();
+  j["active_voxels"] = st.active_voxels;
+  j["leaf_nodes"] = st.leaf_nodes;
+  nlohmann::ordered_json w = nlohmann::ordered_json::array();
+  for (const auto& x : r.warnings) w.push_back({{"line", x.line}, {"column", x.column}, {"message", x.message}});
+  j["warnings"] = w;
+  j["defaults"] = r.defaults.notes;
+  j["outputs"] = {{"glb", out.glb}, {"report", out.report}};
+  j["timing_s"] = {{"parse", r.timing.parse_s}, {"simulate", r.timing.simulate_s},
+                   {"export", r.timing.export_s}, {"total", r.timing.total_s}};
+  j["peak_rss_mb"] = peak_rss_mb();
+  return j.dump(2) + "\n";
+}
+
+std::string report_text(const SimResult& r, const ReportOutputs& out) {
+  std::ostringstream os;
+  char buf[512];
+  for (const auto& n : r.defaults.notes) os << "note: " << n << "\n";
+  std::snprintf(buf, sizeof buf, "%s: %d blocks, %d moves (%d cutting), tool %s, voxel %g mm\n",
+                r.program.c_str(), r.blocks, r.moves, r.cutting_moves, r.tool.name.c_str(), r.voxel_mm);
+  os << buf;
+  std::snprintf(buf, sizeof buf, "stock %.6f mm3 -> %.6f mm3, removed %.6f mm3\n",
+                r.stock->initial_volume_mm3(), r.stock->volume_mm3(), r.stock->removed_volume_mm3());
+  os << buf;
+  for (const auto& x : r.warnings) os << r.program << ":" << x.line << ": warning: " << x.message << "\n";
+  std::snprintf(buf, sizeof buf, "time: parse %.2f s, simulate %.2f s, export %.2f s, total %.2f s; peak RSS %.0f MB\n",
+                r.timing.parse_s, r.timing.simulate_s, r.timing.export_s, r.timing.total_s, peak_rss_mb());
+  os << buf;
+  if (!out.glb.empty()) os << "wrote " << out.glb << "\n";
+  if (!out.report.empty()) os << "wrote " << out.report << "\n";
+  return os.str();
+}
+
+}  // namespace cutsim::sim

@@ -1,0 +1,78 @@
+#pragma once
+// The workpiece: a box whose region of interest (ROI) is an OpenVDB
+// narrow-band level set; outside the ROI the stock stays its analytic box.
+// OpenVDB stays out of this header (see grid_access.h for the grid itself).
+#include <cstddef>
+#include <memory>
+
+#include "cutsim/core/geometry.h"
+#include "cutsim/core/mesh.h"
+#include "cutsim/sweep/sweep.h"
+
+namespace cutsim::stock {
+
+struct StockOptions {
+  double voxel_mm = 0.01;        ///< voxel edge length, mm
+  double half_band_voxels = 3;   ///< narrow band half width, voxels
+  /// Refuse to build a grid whose estimated memory exceeds this, bytes;
+  /// 0 = 75 % of physical memory.
+  std::size_t memory_limit_bytes = 0;
+};
+
+struct StockStats {
+  std::size_t leaf_nodes = 0;
+  std::size_t active_voxels = 0;
+  std::size_t memory_bytes = 0;
+};
+
+/// Estimated grid memory (bytes) for a box stock over an ROI.
+std::size_t estimate_memory_bytes(const Aabb& box, const Aabb& roi, const StockOptions& opt);
+
+class Stock {
+public:
+  /// Builds the level set of `box` over `roi` (clipped to the box grown by
+  /// the band). Positions are mm in the workpiece frame.
+  /// @throw GeometryError when the box is empty or the ROI misses it, or when
+  ///        the estimated memory exceeds the limit (naming both figures and a
+  ///        voxel size that would fit).
+  Stock(const Aabb& box, const Aabb& roi, const StockOptions& opt);
+  ~Stock();
+  Stock(Stock&&) noexcept;
+  Stock& operator=(Stock&&) noexcept;
+
+  /// Removes the swept region from the stock. Material outside the ROI is
+  /// never touched: the ROI must cover every cut (the caller sizes it).
+  void subtract(const sweep::Sweep& sweep);
+
+  /// Stock volume now, mm^3: the analytic box minus what the grid lost.
+  double volume_mm3() const;
+  /// Volume of the box before any cut, mm^3 (exact).
+  double initial_volume_mm3() const;
+  /// Volume removed so far, mm^3, integrated on the grid (voxel coverage).
+  double removed_volume_mm3() const;
+
+  /// Height of the machined surface along +Z at (x, y): the highest zero
+  /// crossing of the level set below `z_from`, by linear interpolation.
+  /// Returns NaN when no crossing is found inside the ROI.
+  double surface_height(double x, double y, double z_from) const;
+  /// Level-set value at a world point (trilinear), mm.
+  double sample(const Vec3& p) const;
+
+  /// The stock's surface: the grid's zero level set clipped to the ROI,
+  /// plus the analytic box faces outside the ROI. Normals from the grid.
+  TriMesh surface_mesh() const;
+
+  const Aabb& box() const;
+  const Aabb& roi() const;  ///< snapped to voxel cells
+  double voxel_mm() const;
+  StockStats stats() const;
+
+  struct Impl;
+  Impl& impl() { return *impl_; }
+  const Impl& impl() const { return *impl_; }
+
+private:
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace cutsim::stock

@@ -1,0 +1,316 @@
+#include <cmath>
+#include <sstream>
+
+#include <openvdb/tools/Interpolation.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <unistd.h>
+
+#include "cutsim/core/error.h"
+#include "stock_impl.h"
+
+namespace cutsim::stock {
+
+using openvdb::Coord;
+using openvdb::CoordBBox;
+using LeafT = openvdb::FloatTree::LeafNodeType;
+
+namespace {
+
+constexpr int kLeafDim = 8;
+constexpr int kNode1Dim = 128;
+
+std::once_flag g_init;
+
+std::size_t physical_memory_bytes() {
+  const long pages = sysconf(_SC_PHYS_PAGES);
+  const long page = sysconf(_SC_PAGE_SIZE);
+  return pages > 0 && page > 0 ? static_cast<std::size_t>(pages) * static_cast<std::size_t>(page) : (8ull << 30);
+}
+
+// Area of the box's faces that lie within `region` (both world boxes).
+double face_area_within(const Aabb& box, const Aabb& region) {
+  double area = 0;
+  for (int k = 0; k < 3; ++k) {
+    const int u = (k + 1) % 3, v = (k + 2) % 3;
+    const double du = std::max(0.0, std::min(box.max[u], region.max[u]) - std::max(box.min[u], region.min[u]));
+    const double dv = std::max(0.0, std::min(box.max[v], region.max[v]) - std::max(box.min[v], region.min[v]));
+    for (double c : {box.min[k], box.max[k]})
+      if (c >= region.min[k] && c <= region.max[k]) area += du * dv;
+  }
+  return area;
+}
+
+Coord floor_coord(const Vec3& v) {
+  return Coord(static_cast<int>(std::floor(v.x())), static_cast<int>(std::floor(v.y())),
+               static_cast<int>(std::floor(v.z())));
+}
+Coord ceil_coord(const Vec3& v) {
+  return Coord(static_cast<int>(std::ceil(v.x())), static_cast<int>(std::ceil(v.y())),
+               static_cast<int>(std::ceil(v.z())));
+}
+
+}  // namespace
+
+std::size_t estimate_memory_bytes(const Aabb& box, const Aabb& roi, const StockOptions& opt) {
+  const double h = opt.voxel_mm;
+  const Aabb region = roi.intersected(box.expanded(opt.half_band_voxels * h + h)).expanded(8 * h);
+  // Leaves straddling the faces: the band crosses a leaf boundary about
+  // half the time, hence 1.5 layers; machined surfaces add about as much
+  // again as the faces they replace, hence the factor 2.
+  const double leaf_area = (kLeafDim * h) * (kLeafDim * h);
+  const double leaves = 2.0 * 1.5 * face_area_within(box, region) / leaf_area;
+  const double bytes_per_leaf = sizeof(float) * 512 + 64 + 96;
+  return static_cast<std::size_t>(leaves * bytes_per_leaf) + (16u << 20);
+}
+
+double Stock::Impl::grid_volume() const {
+  double vol = 0;
+  const double hv = h * h * h;
+  for (auto it = grid->tree().cbeginValueAll(); it; ++it) {
+    const float v = *it;
+    if (it.isVoxelValue()) {
+      if (v >= gamma) continue;
+      if (!roi_index.isInside(it.getCoord())) continue;
+      const double f = std::clamp(0.5 - static_cast<double>(v) / h, 0.0, 1.0);
+      vol += f;
+    } else if (v < 0) {
+      CoordBBox tb;
+      it.getBoundingBox(tb);
+      tb.intersect(roi_index);
+      if (!tb.empty()) vol += static_cast<double>(tb.volume());
+    }
+  }
+  return vol * hv;
+}
+
+Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : impl_(std::make_unique<Impl>()) {
+  std::call_once(g_init, [] { openvdb::initialize(); });
+  if (box.empty() || (box.size().array() <= 0).any())
+    throw GeometryError({}, "the stock box is empty");
+  if (!(opt.voxel_mm > 0) || !std::isfinite(opt.voxel_mm))
+    throw GeometryError({}, "voxel size must be positive");
+  Impl& m = *impl_;
+  m.box = box;
+  m.h = opt.voxel_mm;
+  m.gamma = static_cast<float>(opt.half_band_voxels * m.h);
+  const Aabb roi = roi_in.intersected(box.expanded(m.gamma + m.h));
+  if (roi.empty()) throw GeometryError({}, "the region the tools reach does not meet the stock");
+
+  const std::size_t limit = opt.memory_limit_bytes ? opt.memory_limit_bytes : physical_memory_bytes() / 4 * 3;
+  const std::size_t need = estimate_memory_bytes(box, roi, opt);
+  if (need > limit) {
+    // Memory scales with 1/h^2: suggest the voxel that fits.
+    const double fit = m.h * std::sqrt(static_cast<double>(need) / static_cast<double>(limit)) * 1.05;
+    std::ostringstream os;
+    os << "the stock grid would need about " << need / (1u << 20) << " MiB at " << m.h * 1000
+       << " um voxels, over the limit of " << limit / (1u << 20) << " MiB; a voxel of "
+       << std::ceil(fit * 1e4) / 10 << " um or coarser would fit (or narrow the region of interest)";
+    throw GeometryError({}, os.str());
+  }
+  const double roi_extent = roi.size().maxCoeff() / m.h;
+  if (roi_extent > 1e9) throw GeometryError({}, "the region of interest spans too many voxels");
+
+  m.origin = (roi.center() / m.h).array().round() * m.h;
+  m.roi_index = CoordBBox(floor_coord((roi.min - m.origin) / m.h), ceil_coord((roi.max - m.origin) / m.h));
+  m.roi = Aabb{m.origin + m.h * (Vec3(m.roi_index.min().x(), m.roi_index.min().y(), m.roi_index.min().z()).array() - 0.5).matrix(),
+               m.origin + m.h * (Vec3(m.roi_index.max().x(), m.roi_index.max().y(), m.roi_index.max().z()).array() + 0.5).matrix()};
+  m.grid_index = m.roi_index.expandBy(kLeafDim);
+
+  m.grid = openvdb::FloatGrid::create(m.gamma);
+  m.grid->setTransform(openvdb::math::Transform::createLinearTransform(m.h));
+  m.grid->setGridClass(openvdb::GRID_LEVEL_SET);
+  m.grid->setName("stock");
+  auto& tree = m.grid->tree();
+
+  const double g = m.gamma;
+  auto sd_at = [&](const Vec3& local) { return box_signed_distance(box, m.origin + local); };
+  std::vector<Coord> leaf_origins;
+  const Coord lo = m.grid_index.min(), hi = m.grid_index.max();
+  const Coord lo1(lo.x() & ~(kNode1Dim - 1), lo.y() & ~(kNode1Dim - 1), lo.z() & ~(kNode1Dim - 1));
+  const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * m.h;
+  const double hd0 = std::sqrt(3.0) * 0.5 * (kLeafDim - 1) * m.h;
+  for (int x1 = lo1.x(); x1 <= hi.x(); x1 += kNode1Dim)
+    for (int y1 = lo1.y(); y1 <= hi.y(); y1 += kNode1Dim)
+      for (int z1 = lo1.z(); z1 <= hi.z(); z1 += kNode1Dim) {
+        const CoordBBox nb = CoordBBox::createCube(Coord(x1, y1, z1), kNode1Dim);
+        CoordBBox part = nb;
+        part.intersect(m.grid_index);
+        if (part.empty()) continue;
+        const Vec3 c1 = m.h * (Vec3(x1, y1, z1).array() + 0.5 * (kNode1Dim - 1)).matrix();
+        const double s1 = sd_at(c1);
+        if (s1 > g + hd1) continue;
+        if (s1 < -(g + hd1) && part == nb) {
+          tree.addTile(2, nb.min(), -m.gamma, false);
+          continue;
+        }
+        const Coord p0(part.min().x() & ~(kLeafDim - 1), part.min().y() & ~(kLeafDim - 1), part.min().z() & ~(kLeafDim - 1));
+        for (int x = p0.x(); x <= part.max().x(); x += kLeafDim)
+          for (int y = p0.y(); y <= part.max().y(); y += kLeafDim)
+            for (int z = p0.z(); z <= part.max().z(); z += kLeafDim) {
+              const CoordBBox lb = CoordBBox::createCube(Coord(x, y, z), kLeafDim);
+              CoordBBox lpart = lb;
+              lpart.intersect(m.grid_index);
+              if (lpart.empty()) continue;
+              const Vec3 c0 = m.h * (Vec3(x, y, z).array() + 0.5 * (kLeafDim - 1)).matrix();
+              const double s0 = sd_at(c0);
+              if (s0 > g + hd0) continue;
+              if (s0 < -(g + hd0) && lpart == lb) {
+                tree.addTile(1, lb.min(), -m.gamma, false);
+                continue;
+              }
+              leaf_origins.emplace_back(x, y, z);
+            }
+      }
+  std::vector<LeafT*> leaves;
+  leaves.reserve(leaf_origins.size());
+  for (const Coord& o : leaf_origins) leaves.push_back(tree.touchLeaf(o));
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      LeafT* leaf = leaves[i];
+      for (auto it = leaf->beginValueAll(); it; ++it) {
+        const Coord c = it.getCoord();
+        float v = m.gamma;
+        if (m.grid_index.isInside(c)) {
+          const double s = sd_at(m.h * Vec3(c.x(), c.y(), c.z()));
+          v = static_cast<float>(std::clamp(s, -g, g));
+        }
+        it.setValue(v);
+        it.setValueOn(std::fabs(v) < m.gamma);
+      }
+    }
+  });
+  m.initial_grid_volume = m.grid_volume();
+}
+
+Stock::~Stock() = default;
+Stock::Stock(Stock&&) noexcept = default;
+Stock& Stock::operator=(Stock&&) noexcept = default;
+
+void Stock::subtract(const sweep::Sweep& sw) {
+  Impl& m = *impl_;
+  if (sw.prims.empty() || sw.bounds.empty()) return;
+  const Aabb wb = sw.bounds.expanded(m.gamma + m.h);
+  CoordBBox bb(floor_coord((wb.min - m.origin) / m.h), ceil_coord((wb.max - m.origin) / m.h));
+  bb.intersect(m.roi_index);
+  if (bb.empty()) return;
+
+  auto& tree = m.grid->tree();
+  const double g = m.gamma;
+  const double hd0 = std::sqrt(3.0) * 0.5 * (kLeafDim - 1) * m.h;
+  // Topology, on one thread: find the leaves the cut can change; split
+  // interior tiles the band reaches into leaves (else the cut is lost) and
+  // turn leaves wholly inside the cut into air tiles.
+  std::vector<LeafT*> leaves;
+  const Coord p0(bb.min().x() & ~(kLeafDim - 1), bb.min().y() & ~(kLeafDim - 1), bb.min().z() & ~(kLeafDim - 1));
+  for (int x = p0.x(); x <= bb.max().x(); x += kLeafDim)
+    for (int y = p0.y(); y <= bb.max().y(); y += kLeafDim)
+      for (int z = p0.z(); z <= bb.max().z(); z += kLeafDim) {
+        const Coord o(x, y, z);
+        const Vec3 c0 = m.origin + m.h * (Vec3(x, y, z).array() + 0.5 * (kLeafDim - 1)).matrix();
+        const double d = sw.distance(c0);
+        if (d > g + hd0) continue;
+        const CoordBBox lb = CoordBBox::createCube(o, kLeafDim);
+        const bool whole = m.roi_index.isInside(lb);
+        LeafT* leaf = tree.probeLeaf(o);
+        if (!leaf) {
+          float v;
+          tree.probeValue(o, v);
+          if (v > 0) continue;  // air already
+          if (d < -(g + hd0) && whole) {
+            tree.addTile(1, o, m.gamma, false);
+            continue;
+          }
+          leaf = tree.touchLeaf(o);
+        } else if (d < -(g + hd0) && whole) {
+          tree.addTile(1, o, m.gamma, false);
+          continue;
+        }
+        leaves.push_back(leaf);
+      }
+  if (leaves.empty()) return;
+
+  // Voxels, in parallel: new = max(old, -tool), clamped to the band.
+  std::vector<char> all_air(leaves.size(), 0);
+  const bool single = sw.prims.size() == 1;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
+    std::vector<const sweep::Primitive*> cand;
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      LeafT* leaf = leaves[i];
+      const Coord o = leaf->origin();
+      const Vec3 lmin = m.origin + m.h * Vec3(o.x(), o.y(), o.z());
+      const Aabb lbox{lmin, lmin + Vec3::Constant(m.h * (kLeafDim - 1))};
+      cand.clear();
+      for (const auto& p : sw.prims)
+        if (single || sweep::bounds(p).expanded(g).overlaps(lbox)) cand.push_back(&p);
+      if (cand.empty()) continue;
+      const bool partial = !m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
+      bool air = true;
+      for (auto it = leaf->beginValueAll(); it; ++it) {
+        const Coord c = it.getCoord();
+        float v = *it;
+        if (v < m.gamma && !(partial && !m.roi_index.isInside(c))) {
+          const Vec3 p = m.origin + m.h * Vec3(c.x(), c.y(), c.z());
+          double d = std::numeric_limits<double>::infinity();
+          for (const auto* q : cand) d = std::min(d, sweep::distance(*q, p));
+          if (-d > v) {
+            v = static_cast<float>(std::min(-d, g));
+            it.setValue(v);
+            it.setValueOn(v < m.gamma && v > -m.gamma);
+          }
+        }
+        if (v < m.gamma) air = false;
+      }
+      all_air[i] = air ? 1 : 0;
+    }
+  });
+  for (std::size_t i = 0; i < leaves.size(); ++i)
+    if (all_air[i]) tree.addTile(1, leaves[i]->origin(), m.gamma, false);
+}
+
+double Stock::initial_volume_mm3() const { return impl_->box.volume(); }
+
+double Stock::removed_volume_mm3() const {
+  return impl_->initial_grid_volume - impl_->grid_volume();
+}
+
+double Stock::volume_mm3() const { return initial_volume_mm3() - removed_volume_mm3(); }
+
+double Stock::sample(const Vec3& p) const {
+  const Impl& m = *impl_;
+  const Vec3 idx = (p - m.origin) / m.h;
+  const openvdb::Vec3d ip(idx.x(), idx.y(), idx.z());
+  if (!m.roi.contains(p)) return std::clamp(box_signed_distance(m.box, p), -double(m.gamma), double(m.gamma));
+  auto acc = m.grid->getConstAccessor();
+  return openvdb::tools::BoxSampler::sample(acc, ip);
+}
+
+double Stock::surface_height(double x, double y, double z_from) const {
+  const Impl& m = *impl_;
+  double z = std::min(z_from, m.roi.max.z());
+  const double zmin = m.roi.min.z();
+  double prev = sample(Vec3(x, y, z));
+  const double step = 0.5 * m.h;
+  while (z - step >= zmin) {
+    const double zn = z - step;
+    const double v = sample(Vec3(x, y, zn));
+    if (prev > 0 && v <= 0) return z - step * prev / (prev - v);
+    prev = v;
+    z = zn;
+  }
+  return std::numeric_limits<double>::quiet_NaN();
+}
+
+const Aabb& Stock::box() const { return impl_->box; }
+const Aabb& Stock::roi() const { return impl_->roi; }
+double Stock::voxel_mm() const { return impl_->h; }
+
+StockStats Stock::stats() const {
+  StockStats s;
+  s.leaf_nodes = impl_->grid->tree().leafCount();
+  s.active_voxels = impl_->grid->tree().activeVoxelCount();
+  s.memory_bytes = impl_->grid->tree().memUsage();
+  return s;
+}
+
+}  // namespace cutsim::stock

@@ -1,0 +1,164 @@
+// Surface extraction: the grid's zero level set clipped to the ROI, plus the
+// analytic box faces outside the ROI.
+#include <openvdb/tools/Interpolation.h>
+#include <openvdb/tools/VolumeToMesh.h>
+
+#include "stock_impl.h"
+
+namespace cutsim::stock {
+
+namespace {
+
+// Keeps the part of a convex polygon on the side `sign * (p[k] - c) <= 0`.
+void clip_polygon(std::vector<Vec3>& poly, int k, double c, double sign) {
+  std::vector<Vec3> out;
+  out.reserve(poly.size() + 2);
+  const std::size_t n = poly.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3& a = poly[i];
+    const Vec3& b = poly[(i + 1) % n];
+    const double da = sign * (a[k] - c), db = sign * (b[k] - c);
+    if (da <= 0) out.push_back(a);
+    if ((da < 0 && db > 0) || (da > 0 && db < 0)) {
+      const double t = da / (da - db);
+      Vec3 p = a + t * (b - a);
+      p[k] = c;  // exactly on the plane, so it meets the analytic faces
+      out.push_back(p);
+    }
+  }
+  poly.swap(out);
+}
+
+void add_rect(TriMesh& mesh, int k, double c, bool positive, double u0, double u1, double v0, double v1) {
+  if (u1 - u0 <= 0 || v1 - v0 <= 0) return;
+  const int u = (k + 1) % 3, v = (k + 2) % 3;
+  const auto base = static_cast<std::uint32_t>(mesh.positions.size());
+  const double us[4] = {u0, u1, u1, u0}, vs[4] = {v0, v0, v1, v1};
+  Eigen::Vector3f n = Eigen::Vector3f::Zero();
+  n[k] = positive ? 1.f : -1.f;
+  for (int i = 0; i < 4; ++i) {
+    Vec3 p;
+    p[k] = c;
+    p[u] = us[i];
+    p[v] = vs[i];
+    mesh.positions.push_back(p);
+    mesh.normals.push_back(n);
+  }
+  // (u, v, k) is right-handed, so counter-clockwise in (u, v) faces +k.
+  if (positive) {
+    mesh.triangles.push_back({base, base + 1, base + 2});
+    mesh.triangles.push_back({base, base + 2, base + 3});
+  } else {
+    mesh.triangles.push_back({base, base + 2, base + 1});
+    mesh.triangles.push_back({base, base + 3, base + 2});
+  }
+}
+
+}  // namespace
+
+TriMesh Stock::surface_mesh() const {
+  const Impl& m = *impl_;
+  std::vector<openvdb::Vec3s> points;
+  std::vector<openvdb::Vec3I> tris;
+  std::vector<openvdb::Vec4I> quads;
+  openvdb::tools::volumeToMesh(*m.grid, points, tris, quads, 0.0, 0.0);
+
+  TriMesh mesh;
+  mesh.positions.reserve(points.size());
+  for (const auto& p : points) mesh.positions.push_back(m.origin + Vec3(p.x(), p.y(), p.z()));
+  std::vector<std::array<std::uint32_t, 3>> in;
+  in.reserve(tris.size() + 2 * quads.size());
+  // OpenVDB winds its polygons clockwise seen from outside: flip them.
+  for (const auto& t : tris) in.push_back({t[0], t[2], t[1]});
+  for (const auto& q : quads) {
+    in.push_back({q[0], q[2], q[1]});
+    in.push_back({q[0], q[3], q[2]});
+  }
+
+  // Clip to the ROI cell box where it lies inside the stock box; elsewhere
+  // the grid's surface is the box face itself and needs no clipping.
+  const Aabb& r = m.roi;
+  struct Plane { int k; double c; double sign; };
+  std::vector<Plane> planes;
+  for (int k = 0; k < 3; ++k) {
+    if (r.min[k] > m.box.min[k]) planes.push_back({k, r.min[k], -1});
+    if (r.max[k] < m.box.max[k]) planes.push_back({k, r.max[k], +1});
+  }
+  std::vector<Vec3> poly;
+  for (const auto& t : in) {
+    bool inside = true, outside = false;
+    for (const Plane& pl : planes) {
+      int n_out = 0;
+      for (int i = 0; i < 3; ++i) n_out += pl.sign * (mesh.positions[t[i]][pl.k] - pl.c) > 0;
+      if (n_out > 0) inside = false;
+      if (n_out == 3) { outside = true; break; }
+    }
+    if (outside) continue;
+    if (inside) { mesh.triangles.push_back(t); continue; }
+    poly = {mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]};
+    for (const Plane& pl : planes) {
+      clip_polygon(poly, pl.k, pl.c, pl.sign);
+      if (poly.size() < 3) break;
+    }
+    if (poly.size() < 3) continue;
+    const auto base = static_cast<std::uint32_t>(mesh.positions.size());
+    for (const Vec3& p : poly) mesh.positions.push_back(p);
+    for (std::uint32_t i = 1; i + 1 < poly.size(); ++i) mesh.triangles.push_back({base, base + i, base + i + 1});
+  }
+  // Drop vertices no triangle uses (the clipped-away ones), keeping order.
+  {
+    std::vector<std::uint32_t> remap(mesh.positions.size(), UINT32_MAX);
+    std::vector<Vec3> kept;
+    for (auto& t : mesh.triangles)
+      for (auto& i : t) {
+        if (remap[i] == UINT32_MAX) {
+          remap[i] = static_cast<std::uint32_t>(kept.size());
+          kept.push_back(mesh.positions[i]);
+        }
+        i = remap[i];
+      }
+    mesh.positions.swap(kept);
+  }
+  // Normals from the level set's gradient (central differences, trilinear).
+  mesh.normals.resize(mesh.positions.size());
+  {
+    auto acc = m.grid->getConstAccessor();
+    for (std::size_t i = 0; i < mesh.positions.size(); ++i) {
+      const Vec3 q = (mesh.positions[i] - m.origin) / m.h;
+      Vec3 gr;
+      for (int k = 0; k < 3; ++k) {
+        openvdb::Vec3d a(q.x(), q.y(), q.z()), b = a;
+        a[k] += 0.5;
+        b[k] -= 0.5;
+        gr[k] = openvdb::tools::BoxSampler::sample(acc, a) - openvdb::tools::BoxSampler::sample(acc, b);
+      }
+      const double n = gr.norm();
+      mesh.normals[i] = n > 0 ? Eigen::Vector3f((gr / n).cast<float>()) : Eigen::Vector3f(0, 0, 1);
+    }
+  }
+
+  // Analytic faces of the box outside the ROI.
+  const Aabb& b = m.box;
+  for (int k = 0; k < 3; ++k) {
+    const int u = (k + 1) % 3, v = (k + 2) % 3;
+    for (int side = 0; side < 2; ++side) {
+      const double c = side ? b.max[k] : b.min[k];
+      const bool positive = side == 1;
+      const bool covered = c >= r.min[k] && c <= r.max[k];
+      if (!covered) {
+        add_rect(mesh, k, c, positive, b.min[u], b.max[u], b.min[v], b.max[v]);
+        continue;
+      }
+      // Face minus the ROI's window (clamped to the face): up to four strips.
+      const double wu0 = std::clamp(r.min[u], b.min[u], b.max[u]), wu1 = std::clamp(r.max[u], b.min[u], b.max[u]);
+      const double wv0 = std::clamp(r.min[v], b.min[v], b.max[v]), wv1 = std::clamp(r.max[v], b.min[v], b.max[v]);
+      add_rect(mesh, k, c, positive, b.min[u], b.max[u], b.min[v], wv0);
+      add_rect(mesh, k, c, positive, b.min[u], b.max[u], wv1, b.max[v]);
+      add_rect(mesh, k, c, positive, b.min[u], wu0, wv0, wv1);
+      add_rect(mesh, k, c, positive, wu1, b.max[u], wv0, wv1);
+    }
+  }
+  return mesh;
+}
+
+}  // namespace cutsim::stock

@@ -1,0 +1,66 @@
+#pragma once
+// The region a tool's cutting envelope sweeps along one move, as a signed
+// distance function (mm, negative inside).
+//
+// Exactness: the sign is exact for every primitive (the zero set is the true
+// swept boundary). The distance is exact outside; inside it is exact near
+// the boundary of lines and G17 arcs, and a lower bound (never larger than
+// the true depth) elsewhere. Lower bounds are what the stock update needs
+// for its conservative culling.
+#include <variant>
+#include <vector>
+
+#include "cutsim/core/geometry.h"
+#include "cutsim/motion/move.h"
+#include "cutsim/tool/tool.h"
+
+namespace cutsim::sweep {
+
+/// Envelope moved along a straight line with a fixed tool axis.
+struct LinearPrim {
+  Vec3 origin;      ///< core base at the start (tip + core_offset * axis)
+  Eigen::Matrix3d to_local;  ///< rows: u, v, w (w = tool axis)
+  Vec3 d_local;     ///< the move in local coordinates
+  tool::RevolvedEnvelope env;
+  Aabb bounds;      ///< of the swept region
+  enum class Case { vertical, horizontal, parallelogram, general } kind;
+};
+
+/// Envelope moved along a circular arc in the plane normal to the tool axis
+/// (G17 arcs with a Z tool), constant radius and height.
+struct ArcPrim {
+  Vec3 centre;      ///< arc centre at the core base height
+  double radius = 0;
+  double start_angle = 0;  ///< radians, about +Z
+  double sweep_angle = 0;  ///< signed; |sweep| >= 2 pi means a full circle
+  tool::RevolvedEnvelope env;
+  Aabb bounds;
+};
+
+using Primitive = std::variant<LinearPrim, ArcPrim>;
+
+double distance(const Primitive& p, const Vec3& x);
+const Aabb& bounds(const Primitive& p);
+
+struct SweepOptions {
+  /// Largest distance between an arc and the chords that stand for it where
+  /// an arc cannot be swept exactly (G18/G19 arcs, helices, spirals), mm.
+  double chord_tolerance_mm = 1e-4;
+};
+
+/// The swept cutting region of one move: a union of primitives.
+struct Sweep {
+  std::vector<Primitive> prims;
+  Aabb bounds;
+  double distance(const Vec3& x) const;
+};
+
+/// Builds the sweep of `move` for a tool whose axis is +Z (3-axis milling).
+/// Straight moves and G17 arcs of constant radius and height are exact;
+/// other arcs become chords within `opt.chord_tolerance_mm`.
+Sweep sweep_move(const motion::Move& move, const tool::Tool& tool, const SweepOptions& opt = {});
+
+/// A single tool pose (no motion): the envelope at `tip` with axis +Z.
+Sweep tool_at(const Vec3& tip, const tool::Tool& tool);
+
+}  // namespace cutsim::sweep

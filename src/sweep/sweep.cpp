@@ -1,0 +1,225 @@
+#include "cutsim/sweep/sweep.h"
+
+#include <cmath>
+
+namespace cutsim::sweep {
+
+namespace {
+
+double clamp01(double t) { return t < 0 ? 0 : (t > 1 ? 1 : t); }
+
+// Distance from p to segment [a, b] in 2D.
+double seg_dist2(double px, double py, double bx, double by) {
+  const double bb = bx * bx + by * by;
+  const double t = bb > 0 ? clamp01((px * bx + py * by) / bb) : 0.0;
+  return std::hypot(px - t * bx, py - t * by);
+}
+
+double seg_dist3(const Vec3& p, const Vec3& a, const Vec3& b) {
+  const Vec3 ab = b - a;
+  const double l2 = ab.squaredNorm();
+  const double t = l2 > 0 ? clamp01((p - a).dot(ab) / l2) : 0.0;
+  return (p - a - t * ab).norm();
+}
+
+// Signed distance of an extruded 2D region: `a` the signed in-plane distance,
+// `b` the signed distance along the extrusion axis.
+double prism_sd(double a, double b) {
+  const double ao = std::max(a, 0.0), bo = std::max(b, 0.0);
+  return std::sqrt(ao * ao + bo * bo) + std::min(std::max(a, b), 0.0);
+}
+
+// Distance to the parallelogram {s d + t u : s, t in [0,1]}, u = (0,0,L).
+double parallelogram_dist(const Vec3& p, const Vec3& d, double L) {
+  const Vec3 u(0, 0, L);
+  const Vec3 n = d.cross(u);
+  const double nn = n.norm();
+  if (nn < 1e-15) return seg_dist3(p, Vec3::Zero(), d + u);
+  // In-plane coordinates (s, t) of p's projection.
+  const double dd = d.dot(d), du = d.dot(u), uu = u.dot(u);
+  const double pd = p.dot(d), pu = p.dot(u);
+  const double det = dd * uu - du * du;
+  const double s = (pd * uu - pu * du) / det;
+  const double t = (pu * dd - pd * du) / det;
+  if (s >= 0 && s <= 1 && t >= 0 && t <= 1) return std::fabs(p.dot(n) / nn);
+  const Vec3 o = Vec3::Zero();
+  return std::min(std::min(seg_dist3(p, o, d), seg_dist3(p, u, d + u)),
+                  std::min(seg_dist3(p, o, u), seg_dist3(p, d, d + u)));
+}
+
+// Golden-section minimum of a unimodal function on [0,1].
+template <class F>
+double golden_min(F f) {
+  const double g = 0.6180339887498949;
+  double a = 0, b = 1;
+  double x1 = b - g * (b - a), x2 = a + g * (b - a);
+  double f1 = f(x1), f2 = f(x2);
+  for (int i = 0; i < 60; ++i) {
+    if (f1 < f2) { b = x2; x2 = x1; f2 = f1; x1 = b - g * (b - a); f1 = f(x1); }
+    else { a = x1; x1 = x2; f1 = f2; x2 = a + g * (b - a); f2 = f(x2); }
+  }
+  return std::min(std::min(f(0.0), f(1.0)), std::min(f1, f2));
+}
+
+double linear_distance(const LinearPrim& lp, const Vec3& x) {
+  const Vec3 p = lp.to_local * (x - lp.origin);
+  const auto& e = lp.env;
+  const Vec3& d = lp.d_local;
+  double core;
+  switch (lp.kind) {
+    case LinearPrim::Case::vertical: {
+      const double zlo = std::min(0.0, d.z()), zhi = std::max(0.0, d.z()) + e.core_length;
+      const double a = std::hypot(p.x(), p.y()) - e.disk_radius;
+      const double b = std::max(zlo - p.z(), p.z() - zhi);
+      core = prism_sd(a, b);
+      break;
+    }
+    case LinearPrim::Case::horizontal: {
+      const double a = seg_dist2(p.x(), p.y(), d.x(), d.y()) - e.disk_radius;
+      const double b = std::max(-p.z(), p.z() - e.core_length);
+      core = prism_sd(a, b);
+      break;
+    }
+    case LinearPrim::Case::parallelogram:
+      core = parallelogram_dist(p, d, e.core_length);
+      break;
+    case LinearPrim::Case::general:
+    default: {
+      // K = disk(r) + [0,L] z + [0,1] d. Outside: distance is the minimum
+      // over s of the distance to the translated cylinder (convex in s).
+      const double r = e.disk_radius, L = e.core_length;
+      auto cyl = [&](double s) {
+        const double a = std::hypot(p.x() - s * d.x(), p.y() - s * d.y()) - r;
+        const double b = std::max(s * d.z() - p.z(), p.z() - s * d.z() - L);
+        return prism_sd(a, b);
+      };
+      const double out = golden_min([&](double s) { return std::max(cyl(s), 0.0); });
+      if (out > 0) { core = out; break; }
+      // Inside: the deepest single-cylinder depth, a lower bound on the
+      // depth in the hull (concave in s).
+      core = golden_min(cyl);
+      break;
+    }
+  }
+  return core - e.corner_radius;
+}
+
+double arc_distance(const ArcPrim& ap, const Vec3& x) {
+  const double px = x.x() - ap.centre.x(), py = x.y() - ap.centre.y();
+  const double rho = std::hypot(px, py);
+  const double two_pi = 2 * kPi;
+  bool in_range = std::fabs(ap.sweep_angle) >= two_pi;
+  if (!in_range) {
+    const double phi = std::atan2(py, px);
+    double rel = ap.sweep_angle > 0 ? phi - ap.start_angle : ap.start_angle - phi;
+    rel = std::fmod(rel, two_pi);
+    if (rel < 0) rel += two_pi;
+    in_range = rel <= std::fabs(ap.sweep_angle);
+  }
+  double hd;
+  if (in_range) {
+    hd = std::fabs(rho - ap.radius);
+  } else {
+    const double a0 = ap.start_angle, a1 = ap.start_angle + ap.sweep_angle;
+    hd = std::min(std::hypot(px - ap.radius * std::cos(a0), py - ap.radius * std::sin(a0)),
+                  std::hypot(px - ap.radius * std::cos(a1), py - ap.radius * std::sin(a1)));
+  }
+  const double a = hd - ap.env.disk_radius;
+  const double z = x.z() - ap.centre.z();
+  const double b = std::max(-z, z - ap.env.core_length);
+  return prism_sd(a, b) - ap.env.corner_radius;
+}
+
+Aabb envelope_box_z(const Vec3& base, const tool::RevolvedEnvelope& e) {
+  const double R = e.disk_radius + e.corner_radius;
+  return Aabb{base + Vec3(-R, -R, -e.corner_radius),
+              base + Vec3(R, R, e.core_length + e.corner_radius)};
+}
+
+LinearPrim make_linear(const Vec3& base0, const Vec3& base1, const tool::RevolvedEnvelope& env) {
+  LinearPrim lp;
+  lp.origin = base0;
+  lp.to_local.setIdentity();  // tool axis +Z
+  lp.d_local = base1 - base0;
+  lp.env = env;
+  const Vec3& d = lp.d_local;
+  const double len = d.norm();
+  const double h = std::hypot(d.x(), d.y());
+  if (h <= 1e-12 * std::max(len, 1.0)) lp.kind = LinearPrim::Case::vertical;
+  else if (std::fabs(d.z()) <= 1e-12 * len) lp.kind = LinearPrim::Case::horizontal;
+  else if (env.disk_radius == 0) lp.kind = LinearPrim::Case::parallelogram;
+  else lp.kind = LinearPrim::Case::general;
+  lp.bounds = envelope_box_z(base0, env);
+  lp.bounds.extend(envelope_box_z(base1, env));
+  return lp;
+}
+
+}  // namespace
+
+double distance(const Primitive& p, const Vec3& x) {
+  return std::visit([&](const auto& q) -> double {
+    using T = std::decay_t<decltype(q)>;
+    if constexpr (std::is_same_v<T, LinearPrim>) return linear_distance(q, x);
+    else return arc_distance(q, x);
+  }, p);
+}
+
+const Aabb& bounds(const Primitive& p) {
+  return std::visit([](const auto& q) -> const Aabb& { return q.bounds; }, p);
+}
+
+double Sweep::distance(const Vec3& x) const {
+  double d = std::numeric_limits<double>::infinity();
+  for (const Primitive& p : prims) d = std::min(d, sweep::distance(p, x));
+  return d;
+}
+
+Sweep sweep_move(const motion::Move& m, const tool::Tool& tool, const SweepOptions& opt) {
+  const tool::RevolvedEnvelope env = tool::cutting_envelope(tool);
+  const Vec3 lift(0, 0, env.core_offset);
+  Sweep s;
+  if (!m.is_arc()) {
+    s.prims.emplace_back(make_linear(m.start.xyz + lift, m.end.xyz + lift, env));
+  } else {
+    const double r0 = m.arc_start_radius(), r1 = m.arc_end_radius();
+    const bool planar = std::fabs(m.end.xyz.z() - m.start.xyz.z()) <= 1e-12;
+    if (m.plane_axis == 2 && planar && std::fabs(r1 - r0) <= 1e-9 * std::max(1.0, r0)) {
+      ArcPrim ap;
+      ap.centre = Vec3(m.centre.x(), m.centre.y(), m.start.xyz.z() + env.core_offset);
+      ap.radius = r0;
+      ap.start_angle = std::atan2(m.start.xyz.y() - m.centre.y(), m.start.xyz.x() - m.centre.x());
+      ap.sweep_angle = m.arc_sweep_angle();
+      ap.env = env;
+      // Bounds: the path's box grown by the envelope.
+      Aabb pb = m.path_bounds();
+      ap.bounds = envelope_box_z(pb.min + lift, env);
+      ap.bounds.extend(envelope_box_z(pb.max + lift, env));
+      s.prims.emplace_back(ap);
+    } else {
+      // Chords: sagitta r (1 - cos(a/2)) <= tolerance.
+      const double r = std::max(r0, r1);
+      const double tol = std::min(opt.chord_tolerance_mm, r);
+      const double max_step = 2 * std::acos(1 - tol / r);
+      const int n = std::max(1, static_cast<int>(std::ceil(std::fabs(m.arc_sweep_angle()) / max_step)));
+      Vec3 prev = m.start.xyz;
+      for (int i = 1; i <= n; ++i) {
+        const Vec3 next = (i == n) ? m.end.xyz : m.point_at(static_cast<double>(i) / n);
+        s.prims.emplace_back(make_linear(prev + lift, next + lift, env));
+        prev = next;
+      }
+    }
+  }
+  for (const Primitive& p : s.prims) s.bounds.extend(bounds(p));
+  return s;
+}
+
+Sweep tool_at(const Vec3& tip, const tool::Tool& tool) {
+  const tool::RevolvedEnvelope env = tool::cutting_envelope(tool);
+  const Vec3 base = tip + Vec3(0, 0, env.core_offset);
+  Sweep s;
+  s.prims.emplace_back(make_linear(base, base, env));
+  s.bounds = bounds(s.prims.front());
+  return s;
+}
+
+}  // namespace cutsim::sweep
