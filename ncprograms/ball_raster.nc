@@ -1,0 +1,58 @@
+(cutsim reference: 3-axis zig-zag raster with a 1 mm ball end mill)
+(pick feed 0.1 mm in Y, 0.05 mm deep, then a circular pocket pass)
+(stock 3 x 3 x 2 mm, top at Z0: see ball_raster.toml)
+G21 G90 G17
+T1 M6
+S20000 M3
+G0 Z2
+G0 X-0.6 Y0
+G1 Z-0.05 F200
+G1 X3.6 F600
+G1 Y0.1
+G1 X-0.6 F600
+G1 Y0.2
+G1 X3.6 F600
+G1 Y0.3
+G1 X-0.6 F600
+G1 Y0.4
+G1 X3.6 F600
+G1 Y0.5
+G1 X-0.6 F600
+G1 Y0.6
+G1 X3.6 F600
+G1 Y0.7
+G1 X-0.6 F600
+G1 Y0.8
+G1 X3.6 F600
+G1 Y0.9
+G1 X-0.6 F600
+G1 Y1.0
+G1 X3.6 F600
+G1 Y1.1
+G1 X-0.6 F600
+G1 Y1.2
+G1 X3.6 F600
+G1 Y1.3
+G1 X-0.6 F600
+G1 Y1.4
+G1 X3.6 F600
+G1 Y1.5
+G1 X-0.6 F600
+G1 Y1.6
+G1 X3.6 F600
+G1 Y1.7
+G1 X-0.6 F600
+G1 Y1.8
+G1 X3.6 F600
+G1 Y1.9
+G1 X-0.6 F600
+G1 Y2.0
+G1 X3.6 F600
+G0 Z0.5
+G0 X2.0 Y1.0
+G1 Z-0.15 F200
+G2 X2.0 Y1.0 I-0.5 J0 F600
+G3 X1.0 Y1.0 R0.5
+G0 Z2
+M5
+M30

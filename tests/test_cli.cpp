@@ -1,0 +1,176 @@
+// The cutsim binary as a user runs it: errors with file:line:col, exit
+// codes, no output files on failure, and reproducible results.
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <unistd.h>
+#include <nlohmann/json.hpp>
+
+#include "helpers.h"
+
+namespace cutsim::test {
+
+int run_cli(const std::string& args, std::string* out, std::string* err) {
+  char tmpl[] = "/tmp/cutsim-cli-XXXXXX";
+  const std::string cap = ::mkdtemp(tmpl);
+  const std::string o = cap + "/stdout", e = cap + "/stderr";
+  const std::string cmd = std::string(CUTSIM_BIN) + " " + args + " >" + o + " 2>" + e + " </dev/null";
+  const int status = std::system(cmd.c_str());
+  if (out) *out = slurp(o);
+  if (err) *err = slurp(e);
+  std::error_code ec;
+  std::filesystem::remove_all(cap, ec);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+namespace {
+
+namespace fs = std::filesystem;
+
+const char* kGood = "G21 G90\nG0 X0 Y0 Z1\nG1 Z-0.1 F100\nG1 X1\nG0 Z1\nM30\n";
+
+struct Case {
+  std::string program;     // text of prog.nc
+  std::string extra_args;  // appended after the program
+  int exit_code;
+  std::string location;    // expected "file:line:col" suffix, or ""
+  std::string message;     // a part of the message
+};
+
+void expect_error(const Case& c) {
+  TempDir dir;
+  const std::string prog = dir.write("prog.nc", c.program);
+  const std::string outdir = dir.file("out");
+  std::string out, err;
+  const int code = run_cli("run " + prog + " --stock-box -2,-2,-1,3,2,0 --voxel 0.02 -o " + outdir + " " + c.extra_args,
+                           &out, &err);
+  EXPECT_EQ(code, c.exit_code) << err;
+  if (!c.location.empty()) {
+    EXPECT_NE(err.find(c.location + ": error: "), std::string::npos) << err;
+  }
+  EXPECT_NE(err.find(c.message), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(outdir + "/prog.glb"));
+  EXPECT_FALSE(fs::exists(outdir + "/prog.report.json"));
+  if (fs::exists(outdir)) {
+    EXPECT_TRUE(fs::is_empty(outdir)) << "no partial files";
+  }
+}
+
+TEST(Cli, MalformedWordGivesLineColumnAndCaret) {
+  TempDir dir;
+  expect_error({"G0 X0 Y0 Z1\nG1 X1.2.3 F10\n", "", 65, "prog.nc:2:8", "second decimal point"});
+  std::string err;
+  const auto prog = dir.write("p.nc", "G0 X0\nG1 X1.2.3 F10\n");
+  EXPECT_EQ(run_cli("check " + prog, nullptr, &err), 65);
+  EXPECT_NE(err.find("\n  G1 X1.2.3 F10\n         ^"), std::string::npos) << err;
+}
+
+TEST(Cli, UnknownGCodeIsADataError) {
+  expect_error({"G0 X0 Y0 Z1\nG1 X1 F10\nG7.5 X2\n", "", 65, "prog.nc:3:1", "unknown G code G7.5"});
+}
+
+TEST(Cli, UnknownMCodeIsADataError) {
+  expect_error({"G0 X0 Y0 Z1\nM3 S100 M47\n", "", 65, "prog.nc:2:9", "unknown M code M47"});
+}
+
+TEST(Cli, UnknownToolIsAConfigError) {
+  expect_error({kGood, "--tool cone:d=1", 78, "--tool", "unknown tool kind 'cone'"});
+}
+
+TEST(Cli, MissingProgramIsNoInput) {
+  TempDir dir;
+  std::string err;
+  EXPECT_EQ(run_cli("run " + dir.file("nope.nc") + " -o " + dir.file("out"), nullptr, &err), 66);
+  EXPECT_NE(err.find("nope.nc: error: no such file"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(dir.file("out/nope.glb")));
+}
+
+TEST(Cli, UnwritableOutputDirectoryCannotCreate) {
+  TempDir dir;
+  const auto prog = dir.write("prog.nc", kGood);
+  const auto blocker = dir.write("afile", "x");  // a file where a directory should be
+  std::string err;
+  EXPECT_EQ(run_cli("run " + prog + " --stock-box -2,-2,-1,3,2,0 -o " + blocker + "/sub", nullptr, &err), 73);
+  EXPECT_NE(err.find(blocker + "/sub: error: cannot create output directory"), std::string::npos) << err;
+}
+
+TEST(Cli, BadCommandLineIsUsage) {
+  EXPECT_EQ(run_cli("run"), 64);
+  EXPECT_EQ(run_cli("frobnicate x.nc"), 64);
+  EXPECT_EQ(run_cli("run x.nc --voxel -1"), 64);
+}
+
+TEST(Cli, JobFileBesideTheProgramIsUsedAndReported) {
+  TempDir dir;
+  const auto prog = dir.write("slot.nc", "G0 X0 Y0 Z1\nG1 Z-0.2 F100\nG1 X3\nG0 Z1\n");
+  dir.write("slot.toml", "[stock]\nbox = [-2, -2, -2, 5, 2, 0]\n[tool]\nspec = \"flat:d=2\"\n[simulation]\nvoxel_mm = 0.02\n");
+  std::string out;
+  ASSERT_EQ(run_cli("run " + prog + " --format json -o " + dir.file("out"), &out), 0);
+  const auto j = nlohmann::json::parse(out);
+  EXPECT_EQ(j["tool"]["spec"], "flat:d=2");
+  EXPECT_DOUBLE_EQ(j["voxel_size_mm"].get<double>(), 0.02);
+  EXPECT_NEAR(j["removed_volume_mm3"].get<double>(), (2 * 3 + kPi) * 0.2, 0.05 * 0.02 * (6 + kPi + 0.2 * (6 + 2 * kPi)));
+  for (const char* key : {"program", "blocks", "moves", "voxel_size_mm", "stock_volume_before_mm3",
+                          "stock_volume_after_mm3", "removed_volume_mm3", "timing_s", "peak_rss_mb"})
+    EXPECT_TRUE(j.contains(key)) << key;
+  for (const char* key : {"parse", "simulate", "export", "total"}) EXPECT_TRUE(j["timing_s"].contains(key)) << key;
+  EXPECT_EQ(j["blocks"], 4);
+  EXPECT_EQ(j["moves"], 4);
+  EXPECT_EQ(slurp(dir.file("out/slot.report.json")), out);
+}
+
+TEST(Cli, DefaultsArePrinted) {
+  TempDir dir;
+  const auto prog = dir.write("p.nc", kGood);
+  std::string out;
+  ASSERT_EQ(run_cli("run " + prog + " -o " + dir.file("out"), &out), 0);
+  EXPECT_NE(out.find("note: tool: ball:d=1 (default"), std::string::npos) << out;
+  EXPECT_NE(out.find("note: stock: box -0.5,-0.5,-1.1,1.5,0.5,0 mm (default"), std::string::npos) << out;
+  EXPECT_NE(out.find("note: voxel: 0.02 mm (default"), std::string::npos) << out;
+}
+
+TEST(Cli, CheckDumpPrintsOneJsonLinePerMove) {
+  TempDir dir;
+  const auto prog = dir.write("p.nc", "G20\nG0 X1 Y0 Z0 A90\nG3 X0 Y1 I-1 J0 F2\n");
+  std::string out;
+  ASSERT_EQ(run_cli("check --dump " + prog, &out), 0);
+  std::istringstream lines(out);
+  std::string l1, l2, l3;
+  std::getline(lines, l1);
+  std::getline(lines, l2);
+  EXPECT_FALSE(std::getline(lines, l3));
+  const auto a = nlohmann::json::parse(l1), b = nlohmann::json::parse(l2);
+  EXPECT_EQ(a["line"], 2);
+  EXPECT_EQ(a["motion"], "G0");
+  EXPECT_DOUBLE_EQ(a["end"][0].get<double>(), 25.4);
+  EXPECT_NEAR(a["end"][3].get<double>(), 90.0, 1e-12);
+  EXPECT_EQ(b["motion"], "G3");
+  EXPECT_DOUBLE_EQ(b["centre"][0].get<double>(), 0.0);
+  EXPECT_DOUBLE_EQ(b["centre"][1].get<double>(), 0.0);
+  EXPECT_DOUBLE_EQ(b["feed_mm_per_min"].get<double>(), 2 * 25.4);
+  EXPECT_FALSE(a.contains("centre"));
+}
+
+TEST(Cli, TwoRunsGiveBitIdenticalReportsAndMeshes) {
+  TempDir dir;
+  std::string prog = "G0 X0 Y0 Z1\n";
+  for (int i = 0; i < 12; ++i)
+    prog += "G1 Z-0.05 F100\nG1 X" + std::to_string(2 + 0.1 * i) + " Y" + std::to_string(0.15 * i) +
+            "\nG2 X0 Y" + std::to_string(0.15 * i + 0.15) + " R3\nG0 Z1\n";
+  const auto p = dir.write("p.nc", prog);
+  auto run_once = [&](const std::string& out) {
+    EXPECT_EQ(run_cli("run " + p + " --tool ball:d=0.5 --stock-box -1,-1,-1,4,3,0 --voxel 0.005 -o " + out), 0);
+    auto j = nlohmann::json::parse(slurp(out + "/p.report.json"));
+    j.erase("timing_s");
+    j.erase("peak_rss_mb");
+    j["outputs"] = nullptr;
+    return std::make_pair(j.dump(), slurp(out + "/p.glb"));
+  };
+  const auto a = run_once(dir.file("a")), b = run_once(dir.file("b"));
+  EXPECT_EQ(a.first, b.first);
+  EXPECT_GT(a.second.size(), 1000u);
+  EXPECT_TRUE(a.second == b.second) << "the .glb files differ";
+}
+
+}  // namespace
+}  // namespace cutsim::test

@@ -1,0 +1,86 @@
+// Swept-envelope distances against densely sampled tool poses.
+#include <cmath>
+#include <random>
+
+#include "cutsim/gcode/block_reader.h"
+#include "cutsim/motion/interpreter.h"
+#include "cutsim/sweep/sweep.h"
+#include "helpers.h"
+
+namespace cutsim::test {
+namespace {
+
+motion::Move single_move(const std::string& program) {
+  std::istringstream in(program);
+  gcode::BlockReader reader(in, "t.nc");
+  motion::Interpreter interp("t.nc");
+  std::vector<motion::Move> moves;
+  gcode::Block b;
+  while (reader.next(b)) interp.execute(b, moves);
+  return moves.back();
+}
+
+// Minimum over N poses along the move of the single-pose envelope distance.
+// Outside the swept region this converges to the exact distance from above
+// with error O((path length / N)^2 / R).
+double sampled_distance(const motion::Move& m, const tool::Tool& t, const Vec3& x, int n) {
+  double d = std::numeric_limits<double>::infinity();
+  for (int i = 0; i <= n; ++i) d = std::min(d, sweep::tool_at(m.point_at(double(i) / n), t).distance(x));
+  return d;
+}
+
+void compare(const std::string& program, const std::string& tool_spec, int n_samples, double tol) {
+  const motion::Move m = single_move(program);
+  const tool::Tool t = tool::parse_tool_spec(tool_spec);
+  const sweep::Sweep s = sweep::sweep_move(m, t, sweep::SweepOptions{1e-6});
+  std::mt19937_64 rng(42);
+  const Aabb b = s.bounds.expanded(0.3);
+  std::uniform_real_distribution<double> ux(b.min.x(), b.max.x()), uy(b.min.y(), b.max.y()), uz(b.min.z(), b.max.z());
+  int outside = 0, inside = 0;
+  for (int i = 0; i < 3000; ++i) {
+    const Vec3 x(ux(rng), uy(rng), uz(rng));
+    const double exact = s.distance(x);
+    const double ref = sampled_distance(m, t, x, n_samples);
+    if (ref > tol) {
+      ++outside;
+      EXPECT_NEAR(exact, ref, tol) << "at " << x.transpose();
+    } else if (ref < -tol) {
+      ++inside;
+      EXPECT_LT(exact, 0) << "at " << x.transpose();
+      EXPECT_LE(exact, ref + tol) << "inside depth is at least the deepest single pose's";
+    }
+  }
+  EXPECT_GT(outside, 100);
+  EXPECT_GT(inside, 100);
+}
+
+TEST(Sweep, BallLineMatchesSampledPoses) {
+  compare("G0 X0 Y0 Z0\nG1 X1 Y0.5 Z-0.3 F1\n", "ball:d=1,l=1.5", 4000, 2e-5);
+}
+
+TEST(Sweep, FlatHorizontalLineMatchesSampledPoses) {
+  compare("G0 X0 Y0 Z0\nG1 X1 Y-0.7 F1\n", "flat:d=1,l=1", 4000, 2e-5);
+}
+
+TEST(Sweep, FlatRampMatchesSampledPoses) {
+  compare("G0 X0 Y0 Z0\nG1 X1 Y0.3 Z-0.4 F1\n", "flat:d=1,l=1", 4000, 2e-5);
+}
+
+TEST(Sweep, BullRampMatchesSampledPoses) {
+  compare("G0 X0 Y0 Z0\nG1 X-1 Y0.3 Z0.4 F1\n", "bull:d=1,r=0.2,l=1", 4000, 2e-5);
+}
+
+TEST(Sweep, FlatG17ArcMatchesSampledPoses) {
+  compare("G0 X1 Y0 Z0\nG3 X-1 Y0 R1 F1\n", "flat:d=1,l=1", 8000, 2e-5);
+}
+
+TEST(Sweep, BallHelixChordsMatchSampledPoses) {
+  compare("G0 X1 Y0 Z0\nG2 X0 Y-1 Z-0.5 I-1 J0 F1\n", "ball:d=1,l=1", 8000, 2e-5);
+}
+
+TEST(Sweep, BallG18ArcChordsMatchSampledPoses) {
+  compare("G18 G0 X1 Y0 Z0\nG2 X-1 Z0 I-1 K0 F1\n", "ball:d=1,l=1", 8000, 2e-5);
+}
+
+}  // namespace
+}  // namespace cutsim::test
