@@ -202,31 +202,43 @@ void Stock::subtract(const sweep::Sweep& sw) {
   // interior tiles the band reaches into leaves (else the cut is lost) and
   // turn leaves wholly inside the cut into air tiles.
   std::vector<LeafT*> leaves;
-  const Coord p0(bb.min().x() & ~(kLeafDim - 1), bb.min().y() & ~(kLeafDim - 1), bb.min().z() & ~(kLeafDim - 1));
-  for (int x = p0.x(); x <= bb.max().x(); x += kLeafDim)
-    for (int y = p0.y(); y <= bb.max().y(); y += kLeafDim)
-      for (int z = p0.z(); z <= bb.max().z(); z += kLeafDim) {
-        const Coord o(x, y, z);
-        const Vec3 c0 = m.origin + m.h * (Vec3(x, y, z).array() + 0.5 * (kLeafDim - 1)).matrix();
-        const double d = sw.distance(c0);
-        if (d > g + hd0) continue;
-        const CoordBBox lb = CoordBBox::createCube(o, kLeafDim);
-        const bool whole = m.roi_index.isInside(lb);
-        LeafT* leaf = tree.probeLeaf(o);
-        if (!leaf) {
-          float v;
-          tree.probeValue(o, v);
-          if (v > 0) continue;  // air already
-          if (d < -(g + hd0) && whole) {
-            tree.addTile(1, o, m.gamma, false);
-            continue;
-          }
-          leaf = tree.touchLeaf(o);
-        } else if (d < -(g + hd0) && whole) {
-          tree.addTile(1, o, m.gamma, false);
-          continue;
-        }
-        leaves.push_back(leaf);
+  auto visit_leaf = [&](const Coord& o) {
+    const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
+    const double d = sw.distance(c0);
+    if (d > g + hd0) return;
+    const bool whole = m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
+    LeafT* leaf = tree.probeLeaf(o);
+    if (!leaf) {
+      float v;
+      tree.probeValue(o, v);
+      if (v > 0) return;  // air already
+      if (d < -(g + hd0) && whole) {
+        tree.addTile(1, o, m.gamma, false);
+        return;
+      }
+      leaf = tree.touchLeaf(o);
+    } else if (d < -(g + hd0) && whole) {
+      tree.addTile(1, o, m.gamma, false);
+      return;
+    }
+    leaves.push_back(leaf);
+  };
+  // Coarse blocks first (the distance is a lower bound, so a block whose
+  // centre is farther than the band plus its half diagonal is untouched).
+  const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * m.h;
+  const Coord q0(bb.min().x() & ~(kNode1Dim - 1), bb.min().y() & ~(kNode1Dim - 1), bb.min().z() & ~(kNode1Dim - 1));
+  for (int x1 = q0.x(); x1 <= bb.max().x(); x1 += kNode1Dim)
+    for (int y1 = q0.y(); y1 <= bb.max().y(); y1 += kNode1Dim)
+      for (int z1 = q0.z(); z1 <= bb.max().z(); z1 += kNode1Dim) {
+        const Vec3 c1 = m.origin + m.h * (Vec3(x1, y1, z1).array() + 0.5 * (kNode1Dim - 1)).matrix();
+        if (sw.distance(c1) > g + hd1) continue;
+        CoordBBox part = CoordBBox::createCube(Coord(x1, y1, z1), kNode1Dim);
+        part.intersect(bb);
+        if (part.empty()) continue;
+        const Coord p0(part.min().x() & ~(kLeafDim - 1), part.min().y() & ~(kLeafDim - 1), part.min().z() & ~(kLeafDim - 1));
+        for (int x = p0.x(); x <= part.max().x(); x += kLeafDim)
+          for (int y = p0.y(); y <= part.max().y(); y += kLeafDim)
+            for (int z = p0.z(); z <= part.max().z(); z += kLeafDim) visit_leaf(Coord(x, y, z));
       }
   if (leaves.empty()) return;
 
