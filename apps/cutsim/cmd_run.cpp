@@ -26,6 +26,7 @@ struct RunArgs {
   std::string format = "text";
   std::string stock_box;
   std::string tool;
+  double mesh_adaptivity = 0.01;
 };
 }  // namespace
 
@@ -39,6 +40,9 @@ Action add_run_command(CLI::App& app) {
   cmd->add_option("--format", args->format, "console output: text or json")->check(CLI::IsMember({"text", "json"}));
   cmd->add_option("--stock-box", args->stock_box, "stock box XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX in mm");
   cmd->add_option("--tool", args->tool, "tool spec: ball:d=1, flat:d=6[,l=12], bull:d=2,r=0.2");
+  cmd->add_option("--mesh-adaptivity", args->mesh_adaptivity,
+                  "0: one quad per surface voxel; 0.01 (default) to 1: merge ever less flat regions into larger polygons")
+      ->check(CLI::Range(0.0, 1.0));
 
   return [args]() -> int {
     const auto t0 = std::chrono::steady_clock::now();
@@ -68,7 +72,7 @@ Action add_run_command(CLI::App& app) {
     out.report = (fs::path(args->outdir) / (stem + ".report.json")).string();
 
     const auto t_exp = std::chrono::steady_clock::now();
-    const TriMesh mesh = res.stock->surface_mesh();
+    const TriMesh mesh = res.stock->surface_mesh(args->mesh_adaptivity);
     io::write_glb(out.glb, {io::GltfPart{"machined_stock", &mesh, {0.75f, 0.75f, 0.78f, 1.0f}}});
     res.timing.export_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_exp).count();
     res.timing.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

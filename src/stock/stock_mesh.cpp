@@ -56,12 +56,12 @@ void add_rect(TriMesh& mesh, int k, double c, bool positive, double u0, double u
 
 }  // namespace
 
-TriMesh Stock::surface_mesh() const {
+TriMesh Stock::surface_mesh(double adaptivity) const {
   const Impl& m = *impl_;
   std::vector<openvdb::Vec3s> points;
   std::vector<openvdb::Vec3I> tris;
   std::vector<openvdb::Vec4I> quads;
-  openvdb::tools::volumeToMesh(*m.grid, points, tris, quads, 0.0, 0.0);
+  openvdb::tools::volumeToMesh(*m.grid, points, tris, quads, 0.0, adaptivity);
 
   TriMesh mesh;
   mesh.positions.reserve(points.size());

@@ -60,7 +60,10 @@ public:
 
   /// The stock's surface: the grid's zero level set clipped to the ROI,
   /// plus the analytic box faces outside the ROI. Normals from the grid.
-  TriMesh surface_mesh() const;
+  /// `adaptivity` in [0, 1] is OpenVDB's: 0 keeps one quad per surface
+  /// voxel; larger values merge flat regions (the top face) into fewer,
+  /// larger polygons without cracks.
+  TriMesh surface_mesh(double adaptivity = 0.0) const;
 
   const Aabb& box() const;
   const Aabb& roi() const;  ///< snapped to voxel cells
