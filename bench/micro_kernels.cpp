@@ -1,0 +1,72 @@
+// Google Benchmark micro-benchmarks of the hot kernels: the block reader,
+// sweep distances and the stock update.
+#include <benchmark/benchmark.h>
+
+#include <sstream>
+
+#include "cutsim/gcode/block_reader.h"
+#include "cutsim/motion/interpreter.h"
+#include "cutsim/stock/stock.h"
+#include "cutsim/sweep/sweep.h"
+
+namespace {
+
+using namespace cutsim;
+
+motion::Move make_move(const std::string& program) {
+  std::istringstream in(program);
+  gcode::BlockReader reader(in, "b.nc");
+  motion::Interpreter interp("b.nc");
+  std::vector<motion::Move> moves;
+  gcode::Block b;
+  while (reader.next(b)) interp.execute(b, moves);
+  return moves.back();
+}
+
+void BM_ParseLine(benchmark::State& state) {
+  const std::string line = "G1 X12.345678 Y-3.141593 Z-0.012345 F1200";
+  gcode::Block b;
+  for (auto _ : state) {
+    gcode::BlockReader::parse_line("b.nc", 1, line, b);
+    benchmark::DoNotOptimize(b.words.data());
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations() * (line.size() + 1)));
+}
+BENCHMARK(BM_ParseLine);
+
+void sweep_distance(benchmark::State& state, const std::string& program, const std::string& tool_spec) {
+  const auto s = sweep::sweep_move(make_move(program), tool::parse_tool_spec(tool_spec));
+  Vec3 p(0.3, 0.2, -0.1);
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(s.distance(p));
+    p.x() += 1e-9;
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK_CAPTURE(sweep_distance, ball_line, "G0 X0 Y0 Z0\nG1 X1 Y0.5 Z-0.1 F1\n", "ball:d=1");
+BENCHMARK_CAPTURE(sweep_distance, flat_horizontal, "G0 X0 Y0 Z0\nG1 X1 Y0.5 F1\n", "flat:d=1");
+BENCHMARK_CAPTURE(sweep_distance, flat_ramp, "G0 X0 Y0 Z0\nG1 X1 Y0.5 Z-0.1 F1\n", "flat:d=1");
+BENCHMARK_CAPTURE(sweep_distance, flat_g17_arc, "G0 X1 Y0 Z0\nG3 X-1 Y0 R1 F1\n", "flat:d=1");
+
+void BM_StockSubtractBallPass(benchmark::State& state) {
+  const double h = 0.001 * static_cast<double>(state.range(0));
+  const tool::Tool t = tool::parse_tool_spec("ball:d=1");
+  stock::StockOptions opt;
+  opt.voxel_mm = h;
+  const Aabb box{Vec3(-1, -1, -1), Vec3(3, 1, 0)};
+  std::size_t voxels = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    stock::Stock st(box, box, opt);
+    const auto s = sweep::sweep_move(make_move("G0 X0 Y0 Z-0.05\nG1 X2 F1\n"), t);
+    state.ResumeTiming();
+    st.subtract(s);
+    voxels = st.stats().active_voxels;
+  }
+  state.counters["active_voxels"] = static_cast<double>(voxels);
+}
+BENCHMARK(BM_StockSubtractBallPass)->Arg(10)->Arg(5)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
