@@ -85,7 +85,7 @@ TEST(BlockReader, ErrorFormatShowsTheLineAndACaret) {
     parse("G1 X1.2.3");
     FAIL();
   } catch (const ParseError& e) {
-    EXPECT_EQ(e.format(), "t.nc:7:8: error: malformed number in word 'X': second decimal point\n  G1 X1.2.3\n         ^");
+    EXPECT_EQ(e.format(), "t.nc:7:8: error: malformed number: second decimal point\n  G1 X1.2.3\n         ^");
     EXPECT_EQ(e.code(), ExitCode::data);
   }
 }

@@ -7,6 +7,7 @@
 
 #include "commands.h"
 #include "cutsim/core/error.h"
+#include "cutsim/io/job.h"
 #include "cutsim/sim/simulate.h"
 
 namespace cutsim::app {
@@ -15,6 +16,8 @@ namespace {
 struct CheckArgs {
   std::string program;
   bool dump = false;
+  std::string dialect = "rs274ngc";
+  bool block_delete = false;
 };
 }  // namespace
 
@@ -23,10 +26,16 @@ Action add_check_command(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand("check", "parse and interpret a program; print errors and warnings");
   cmd->add_option("program", args->program, "NC program (G-code)")->required();
   cmd->add_flag("--dump", args->dump, "print the resolved motion as JSON lines, one per move (mm, degrees)");
+  cmd->add_option("--dialect", args->dialect, "G-code dialect: rs274ngc (default) or fanuc")
+      ->check(CLI::IsMember({"rs274ngc", "fanuc"}));
+  cmd->add_flag("--block-delete", args->block_delete, "skip lines that start with '/'");
 
   return [args]() -> int {
     if (!std::filesystem::exists(args->program)) throw InputError(args->program, "no such file");
     motion::InterpreterOptions iopt;
+    sim::ProgramOptions popt;
+    popt.dialect = io::parse_dialect(args->dialect, "--dialect");
+    popt.block_delete = args->block_delete;
     auto on_move = [&](const motion::Move& m) {
       if (!args->dump) return;
       nlohmann::ordered_json j;
@@ -38,7 +47,7 @@ Action add_check_command(CLI::App& app) {
       j["feed_mm_per_min"] = m.feed_mm_per_min;
       std::cout << j.dump() << "\n";
     };
-    const sim::CheckResult r = sim::check_program(args->program, iopt, on_move);
+    const sim::CheckResult r = sim::check_program(args->program, popt, iopt, on_move);
     for (const auto& w : r.warnings)
       std::cerr << args->program << ":" << w.line << ":" << w.column << ": warning: " << w.message << "\n";
     (args->dump ? std::cerr : std::cout) << args->program << ": " << r.blocks << " blocks, " << r.moves

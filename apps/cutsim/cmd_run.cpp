@@ -27,6 +27,8 @@ struct RunArgs {
   std::string stock_box;
   std::string tool;
   double mesh_adaptivity = 0.01;
+  std::string dialect;
+  bool block_delete = false;
 };
 }  // namespace
 
@@ -40,6 +42,9 @@ Action add_run_command(CLI::App& app) {
   cmd->add_option("--format", args->format, "console output: text or json")->check(CLI::IsMember({"text", "json"}));
   cmd->add_option("--stock-box", args->stock_box, "stock box XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX in mm");
   cmd->add_option("--tool", args->tool, "tool spec: ball:d=1, flat:d=6[,l=12], bull:d=2,r=0.2");
+  cmd->add_option("--dialect", args->dialect, "G-code dialect: rs274ngc (default) or fanuc")
+      ->check(CLI::IsMember({"rs274ngc", "fanuc"}));
+  cmd->add_flag("--block-delete", args->block_delete, "skip lines that start with '/'");
   cmd->add_option("--mesh-adaptivity", args->mesh_adaptivity,
                   "0: one quad per surface voxel; 0.01 (default) to 1: merge ever less flat regions into larger polygons")
       ->check(CLI::Range(0.0, 1.0));
@@ -59,6 +64,8 @@ Action add_run_command(CLI::App& app) {
     if (!args->stock_box.empty()) opt.stock_box = io::parse_box(args->stock_box, "--stock-box");
     if (!args->tool.empty()) opt.tool = tool::parse_tool_spec(args->tool, "--tool");
     if (args->voxel > 0) opt.voxel_mm = args->voxel;
+    if (!args->dialect.empty()) opt.dialect = io::parse_dialect(args->dialect, "--dialect");
+    opt.block_delete = args->block_delete;
     io::ensure_writable_directory(args->outdir);
 
     ProgressBar bar;

@@ -67,6 +67,12 @@ Aabb parse_box(const std::string& text, const std::string& origin) {
   return b;
 }
 
+gcode::Dialect parse_dialect(const std::string& name, const std::string& origin) {
+  if (name == "rs274ngc") return gcode::Dialect::rs274ngc;
+  if (name == "fanuc") return gcode::Dialect::fanuc;
+  throw ConfigError(SourceLocation{origin, 0, 0, {}}, "unknown dialect '" + name + "' (known: rs274ngc, fanuc)");
+}
+
 Job load_job(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path, "cannot open job file");
@@ -81,7 +87,26 @@ Job load_job(const std::string& path) {
   }
   Job job;
   job.source = path;
-  ctx.only_keys(root, {"stock", "tool", "simulation"}, "the job");
+  ctx.only_keys(root, {"program", "stock", "tool", "simulation"}, "the job");
+  if (auto* pr = root["program"].as_table()) {
+    ctx.only_keys(*pr, {"dialect", "block_delete"}, "[program]");
+    if (auto* d = pr->get("dialect")) {
+      const auto v = d->value<std::string>();
+      if (!v) ctx.fail(d->source(), "[program] dialect must be a string");
+      try {
+        job.dialect = parse_dialect(*v, path);
+      } catch (const ConfigError& e) {
+        ctx.fail(d->source(), e.message());
+      }
+    }
+    if (auto* b = pr->get("block_delete")) {
+      const auto v = b->value<bool>();
+      if (!v) ctx.fail(b->source(), "[program] block_delete must be true or false");
+      job.block_delete = *v;
+    }
+  } else if (root.contains("program")) {
+    ctx.fail(root.get("program")->source(), "[program] must be a table");
+  }
   if (auto* st = root["stock"].as_table()) {
     ctx.only_keys(*st, {"box"}, "[stock]");
     if (auto* b = st->get("box")) {

@@ -15,32 +15,35 @@ const char* motion_name(MotionKind k) {
 }
 
 namespace {
-// In-plane axes (u, v) for the plane normal to axis `n`, right-handed:
-// G17 (n=2): X,Y; G18 (n=1): Z,X; G19 (n=0): Y,Z.
-void plane_axes(int n, int& u, int& v) {
-  u = (n + 1) % 3;
-  v = (n + 2) % 3;
+// In-plane basis (u, v) with u towards the start point and v = n x u.
+struct PlaneFrame {
+  Vec3 u, v, n;
+};
+PlaneFrame frame_of(const Move& m) {
+  PlaneFrame f;
+  f.n = m.normal;
+  Vec3 r = m.start.xyz - m.centre;
+  r -= r.dot(f.n) * f.n;
+  const double len = r.norm();
+  if (len > 0) f.u = r / len;
+  else f.u = f.n.unitOrthogonal();
+  f.v = f.n.cross(f.u);
+  return f;
+}
+double in_plane_radius(const Move& m, const Vec3& p) {
+  Vec3 r = p - m.centre;
+  r -= r.dot(m.normal) * m.normal;
+  return r.norm();
 }
 }  // namespace
 
-double Move::arc_start_radius() const {
-  int u, v;
-  plane_axes(plane_axis, u, v);
-  return std::hypot(start.xyz[u] - centre[u], start.xyz[v] - centre[v]);
-}
-
-double Move::arc_end_radius() const {
-  int u, v;
-  plane_axes(plane_axis, u, v);
-  return std::hypot(end.xyz[u] - centre[u], end.xyz[v] - centre[v]);
-}
+double Move::arc_start_radius() const { return in_plane_radius(*this, start.xyz); }
+double Move::arc_end_radius() const { return in_plane_radius(*this, end.xyz); }
 
 double Move::arc_sweep_angle() const {
-  int u, v;
-  plane_axes(plane_axis, u, v);
-  const double a0 = std::atan2(start.xyz[v] - centre[v], start.xyz[u] - centre[u]);
-  const double a1 = std::atan2(end.xyz[v] - centre[v], end.xyz[u] - centre[u]);
-  double d = a1 - a0;
+  const PlaneFrame f = frame_of(*this);
+  const Vec3 r1 = end.xyz - centre;
+  double d = std::atan2(r1.dot(f.v), r1.dot(f.u));  // end angle, start at 0
   const double two_pi = 2 * kPi;
   if (kind == MotionKind::arc_ccw) {
     while (d <= 1e-12) d += two_pi;
@@ -55,17 +58,12 @@ double Move::arc_sweep_angle() const {
 
 Vec3 Move::point_at(double t) const {
   if (!is_arc()) return start.xyz + t * (end.xyz - start.xyz);
-  int u, v;
-  plane_axes(plane_axis, u, v);
-  const double a0 = std::atan2(start.xyz[v] - centre[v], start.xyz[u] - centre[u]);
-  const double a = a0 + t * arc_sweep_angle();
-  const double r = arc_start_radius() + t * (arc_end_radius() - arc_start_radius());
-  Vec3 p;
-  p[u] = centre[u] + r * std::cos(a);
-  p[v] = centre[v] + r * std::sin(a);
-  p[plane_axis] = start.xyz[plane_axis] + t * (end.xyz[plane_axis] - start.xyz[plane_axis]);
   if (t >= 1.0) return end.xyz;  // exact end point
-  return p;
+  const PlaneFrame f = frame_of(*this);
+  const double a = t * arc_sweep_angle();
+  const double r = arc_start_radius() + t * (arc_end_radius() - arc_start_radius());
+  const double axial0 = (start.xyz - centre).dot(f.n), axial1 = (end.xyz - centre).dot(f.n);
+  return centre + r * (std::cos(a) * f.u + std::sin(a) * f.v) + (axial0 + t * (axial1 - axial0)) * f.n;
 }
 
 Aabb Move::path_bounds() const {
@@ -73,24 +71,20 @@ Aabb Move::path_bounds() const {
   b.extend(start.xyz);
   b.extend(end.xyz);
   if (!is_arc()) return b;
-  int u, v;
-  plane_axes(plane_axis, u, v);
+  // Extremes of a circle in each coordinate: where the tangent is normal to
+  // that axis. Sample densely enough and pad by the sampling sagitta.
+  const double sweep = std::fabs(arc_sweep_angle());
+  const int n = std::max(8, static_cast<int>(std::ceil(sweep / (kPi / 64))));
+  for (int i = 1; i < n; ++i) b.extend(point_at(static_cast<double>(i) / n));
   const double r = std::max(arc_start_radius(), arc_end_radius());
-  // Conservative: the full circle's box in the plane, clipped by nothing.
-  // Tight enough for region-of-interest use, cheap, and never too small.
-  const double a0 = std::atan2(start.xyz[v] - centre[v], start.xyz[u] - centre[u]);
-  const double sweep = arc_sweep_angle();
-  // Add the axis-extreme points that the arc passes.
-  for (int q = -8; q <= 8; ++q) {
-    const double a = q * kPi / 2;
-    const double t = (a - a0) / sweep;
-    if (t > 0 && t < 1) {
-      Vec3 p = point_at(t);
-      b.extend(p);
-    }
-  }
-  (void)r;
-  return b;
+  return b.expanded(r * (1 - std::cos(sweep / n / 2)));
+}
+
+double Move::length() const {
+  if (!is_arc()) return (end.xyz - start.xyz).norm();
+  const double r = 0.5 * (arc_start_radius() + arc_end_radius());
+  const double axial = (end.xyz - start.xyz).dot(normal);
+  return std::hypot(r * arc_sweep_angle(), axial);
 }
 
 }  // namespace cutsim::motion

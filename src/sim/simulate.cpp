@@ -7,7 +7,7 @@
 #include <sys/resource.h>
 
 #include "cutsim/core/error.h"
-#include "cutsim/gcode/block_reader.h"
+#include "cutsim/gcode/program_reader.h"
 #include "cutsim/sweep/sweep.h"
 
 namespace cutsim::sim {
@@ -27,9 +27,14 @@ std::ifstream open_program(const std::string& path) {
 
 // Streams the program through the interpreter, calling `f` for every move.
 template <class F>
-CheckResult stream_moves(const std::string& path, const motion::InterpreterOptions& iopt, F&& f) {
+CheckResult stream_moves(const std::string& path, const ProgramOptions& popt, const motion::InterpreterOptions& iopt_in, F&& f) {
   std::ifstream in = open_program(path);
-  gcode::BlockReader reader(in, path);
+  gcode::ReaderOptions ropt;
+  ropt.dialect = popt.dialect;
+  ropt.block_delete = popt.block_delete;
+  gcode::ProgramReader reader(in, path, ropt);
+  motion::InterpreterOptions iopt = iopt_in;
+  iopt.dialect = popt.dialect;
   motion::Interpreter interp(path, iopt);
   gcode::Block block;
   std::vector<motion::Move> moves;
@@ -70,9 +75,10 @@ double peak_rss_mb() {
   return static_cast<double>(ru.ru_maxrss) / 1024.0;
 }
 
-CheckResult check_program(const std::string& program, const motion::InterpreterOptions& iopt,
+CheckResult check_program(const std::string& program, const ProgramOptions& popt,
+                          const motion::InterpreterOptions& iopt,
                           const std::function<void(const motion::Move&)>& on_move) {
-  return stream_moves(program, iopt, [&](const motion::Move& m, const gcode::Block&) {
+  return stream_moves(program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
     if (on_move) on_move(m);
   });
 }
@@ -83,6 +89,9 @@ SimResult simulate(const SimOptions& opt) {
   res.program = opt.program;
 
   // Settings: command line over job file over defaults.
+  ProgramOptions popt;
+  popt.dialect = opt.dialect ? *opt.dialect : opt.job.dialect ? *opt.job.dialect : gcode::Dialect::rs274ngc;
+  popt.block_delete = opt.block_delete || opt.job.block_delete.value_or(false);
   res.tool = opt.tool ? *opt.tool : opt.job.tool ? *opt.job.tool : tool::parse_tool_spec("ball:d=1", "default");
   if (!opt.tool && !opt.job.tool) res.defaults.notes.push_back("tool: ball:d=1 (default; set --tool or [tool] spec)");
   const double tool_r = res.tool.radius();
@@ -104,7 +113,7 @@ SimResult simulate(const SimOptions& opt) {
   };
   {
     iopt.initial.xyz = opt.job.start_mm ? *opt.job.start_mm : Vec3(0, 0, 0);
-    const CheckResult cr = stream_moves(opt.program, iopt, [&](const motion::Move& m, const gcode::Block& b) {
+    const CheckResult cr = stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block& b) {
       check_axes(m, b);
       if (m.is_cutting_feed()) {
         ++res.cutting_moves;
@@ -160,7 +169,7 @@ SimResult simulate(const SimOptions& opt) {
   const Aabb stock_reach = res.stock_box.expanded(margin);
   Aabb roi;
   int total_moves = 0;
-  stream_moves(opt.program, iopt, [&](const motion::Move& m, const gcode::Block&) {
+  stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
     ++total_moves;
     const Aabb b = sweep::sweep_move(m, res.tool).bounds;
     if (b.overlaps(stock_reach)) roi.extend(b.intersected(stock_reach));
@@ -176,7 +185,7 @@ SimResult simulate(const SimOptions& opt) {
 
   // Pass 2: cut.
   int done = 0;
-  stream_moves(opt.program, iopt, [&](const motion::Move& m, const gcode::Block&) {
+  stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
     const sweep::Sweep s = sweep::sweep_move(m, res.tool, sweep::SweepOptions{std::min(1e-4, res.voxel_mm / 20)});
     res.stock->subtract(s);
     ++done;

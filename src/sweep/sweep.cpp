@@ -183,12 +183,13 @@ Sweep sweep_move(const motion::Move& m, const tool::Tool& tool, const SweepOptio
   } else {
     const double r0 = m.arc_start_radius(), r1 = m.arc_end_radius();
     const bool planar = std::fabs(m.end.xyz.z() - m.start.xyz.z()) <= 1e-12;
-    if (m.plane_axis == 2 && planar && std::fabs(r1 - r0) <= 1e-9 * std::max(1.0, r0)) {
+    const bool about_z = std::fabs(std::fabs(m.normal.z()) - 1.0) <= 1e-12;
+    if (about_z && planar && std::fabs(r1 - r0) <= 1e-9 * std::max(1.0, r0)) {
       ArcPrim ap;
       ap.centre = Vec3(m.centre.x(), m.centre.y(), m.start.xyz.z() + env.core_offset);
       ap.radius = r0;
       ap.start_angle = std::atan2(m.start.xyz.y() - m.centre.y(), m.start.xyz.x() - m.centre.x());
-      ap.sweep_angle = m.arc_sweep_angle();
+      ap.sweep_angle = m.normal.z() > 0 ? m.arc_sweep_angle() : -m.arc_sweep_angle();
       ap.env = env;
       // Bounds: the path's box grown by the envelope.
       Aabb pb = m.path_bounds();

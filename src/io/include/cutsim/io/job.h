@@ -5,6 +5,7 @@
 #include <string>
 
 #include "cutsim/core/geometry.h"
+#include "cutsim/gcode/block.h"
 #include "cutsim/tool/tool.h"
 
 namespace cutsim::io {
@@ -16,12 +17,18 @@ struct Job {
   std::optional<double> voxel_mm;    ///< [simulation] voxel_mm
   std::optional<Vec3> start_mm;      ///< [simulation] start = [x,y,z], tool tip at program start
   std::optional<double> memory_limit_mb;  ///< [simulation] memory_limit_mb
+  std::optional<gcode::Dialect> dialect;  ///< [program] dialect = "rs274ngc" | "fanuc"
+  std::optional<bool> block_delete;       ///< [program] block_delete
 };
 
 /// Reads a job file.
 /// @throw InputError if it cannot be read; ConfigError with file:line:col for
 ///        a TOML syntax error, an unknown key, or a value of the wrong type.
 Job load_job(const std::string& path);
+
+/// "rs274ngc" or "fanuc".
+/// @throw ConfigError naming `origin` for anything else.
+gcode::Dialect parse_dialect(const std::string& name, const std::string& origin);
 
 /// Parses `XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX` (mm).
 /// @throw ConfigError naming `origin` when malformed or empty.

@@ -1,7 +1,6 @@
 #pragma once
 // A resolved move in the workpiece frame: mm and radians inside, with the NC
 // line that caused it.
-#include <array>
 #include <memory>
 #include <string>
 
@@ -26,26 +25,31 @@ struct Move {
   MotionKind kind = MotionKind::linear;
   AxisValues start, end;
   // Arcs only:
-  Vec3 centre = Vec3::Zero();  ///< arc centre, in the arc plane at the start's height
-  int plane_axis = 2;          ///< axis normal to the arc plane: 2 (G17), 1 (G18), 0 (G19)
+  Vec3 centre = Vec3::Zero();  ///< arc centre, in the arc's plane through the start
+  Vec3 normal = Vec3::UnitZ(); ///< unit normal of the arc plane; G3 turns positively about it
   int turns = 1;               ///< full turns for P>1 (1 = the ordinary arc)
-  double feed_mm_per_min = 0;  ///< 0 for rapids
+  double feed_mm_per_min = 0;  ///< 0 for rapids and for inverse-time moves without length
+  double duration_s = 0;       ///< inverse time (G93): the move's time; else 0
   int tool = 0;                ///< T number in the spindle
+  bool tcp = false;            ///< tool centre point control (G43.4/G43.5) active
+  Vec3 tool_axis = Vec3::UnitZ();  ///< requested tool axis in the workpiece frame (G53.1)
 
   bool is_arc() const { return kind == MotionKind::arc_cw || kind == MotionKind::arc_ccw; }
   bool is_cutting_feed() const { return kind != MotionKind::rapid; }
 
-  /// Signed sweep angle of an arc in radians about +plane axis (negative
-  /// for clockwise), including extra turns; a full circle is +-2 pi.
+  /// Signed sweep angle of an arc in radians about `normal` (negative for
+  /// clockwise), including extra turns; a full circle is +-2 pi.
   double arc_sweep_angle() const;
   /// Arc radius at the start and at the end (they may differ slightly).
   double arc_start_radius() const;
   double arc_end_radius() const;
   /// Point on the path at parameter t in [0,1] (arcs: angle and radius
-  /// interpolated linearly, the axis normal to the plane linearly: helix).
+  /// interpolated linearly, the component along the normal linearly: helix).
   Vec3 point_at(double t) const;
   /// Bounding box of the tool control point over the whole move.
   Aabb path_bounds() const;
+  /// Path length, mm (arcs: the helix length).
+  double length() const;
 };
 
 }  // namespace cutsim::motion

@@ -9,6 +9,7 @@
 
 #include "cutsim/core/geometry.h"
 #include "cutsim/core/mesh.h"
+#include "cutsim/gcode/block.h"
 #include "cutsim/io/job.h"
 #include "cutsim/motion/interpreter.h"
 #include "cutsim/stock/stock.h"
@@ -16,12 +17,20 @@
 
 namespace cutsim::sim {
 
+/// How the program text is read.
+struct ProgramOptions {
+  gcode::Dialect dialect = gcode::Dialect::rs274ngc;
+  bool block_delete = false;  ///< skip lines starting with '/'
+};
+
 struct SimOptions {
   std::string program;          ///< NC program path
   io::Job job;                  ///< settings from the job file, overridden below
   std::optional<Aabb> stock_box;     ///< --stock-box
   std::optional<tool::Tool> tool;    ///< --tool
   std::optional<double> voxel_mm;    ///< --voxel
+  std::optional<gcode::Dialect> dialect;  ///< --dialect
+  bool block_delete = false;         ///< --block-delete
   /// Called with the fraction done (0..1) and the NC line being cut.
   std::function<void(double, int)> progress;
 };
@@ -64,7 +73,8 @@ struct CheckResult {
 
 /// Interprets the program; calls `on_move` for each move if given.
 /// @throw cutsim::Error subclasses.
-CheckResult check_program(const std::string& program, const motion::InterpreterOptions& iopt,
+CheckResult check_program(const std::string& program, const ProgramOptions& popt,
+                          const motion::InterpreterOptions& iopt,
                           const std::function<void(const motion::Move&)>& on_move = {});
 
 /// Peak resident set size of this process, MiB.
