@@ -339,7 +339,10 @@ bool ProgramReader::next(Block& b) {
     if (!read_line(line)) {
       if (!stack_.empty()) {
         const Frame& f = stack_.back();
-        throw ParseError(SourceLocation{file_, f.line, 0, {}}, "the file ends inside a construct opened here");
+        static const char* kNames[] = {"call", "M98 call", "while", "do", "repeat", "if"};
+        const std::string what = f.kind == FrameKind::m98 ? "subprogram O" + f.name
+                                 : "o" + f.name + " " + kNames[static_cast<int>(f.kind)];
+        throw ParseError(SourceLocation{file_, f.line, 0, {}}, "the file ends inside " + what + " (opened at this line)");
       }
       return false;
     }
