@@ -1,4 +1,6 @@
 // The block reader: words, columns, comments and malformed input.
+#include <cstdlib>
+#include <random>
 #include <sstream>
 
 #include "cutsim/core/error.h"
@@ -87,6 +89,21 @@ TEST(BlockReader, ErrorFormatShowsTheLineAndACaret) {
   } catch (const ParseError& e) {
     EXPECT_EQ(e.format(), "t.nc:7:8: error: malformed number: second decimal point\n  G1 X1.2.3\n         ^");
     EXPECT_EQ(e.code(), ExitCode::data);
+  }
+}
+
+TEST(BlockReader, NumbersAreBitIdenticalToStrtod) {
+  std::mt19937_64 rng(7);
+  for (int i = 0; i < 20000; ++i) {
+    const int int_digits = static_cast<int>(rng() % 6), frac_digits = static_cast<int>(rng() % 21);
+    std::string num = (rng() % 2) ? "-" : "";
+    for (int k = 0; k < int_digits; ++k) num += static_cast<char>('0' + rng() % 10);
+    num += '.';
+    for (int k = 0; k < frac_digits; ++k) num += static_cast<char>('0' + rng() % 10);
+    if (int_digits == 0 && frac_digits == 0) num += '0';
+    const Block b = parse("X" + num);
+    ASSERT_EQ(b.words.size(), 1u);
+    EXPECT_EQ(b.words[0].value, std::strtod(num.c_str(), nullptr)) << num;
   }
 }
 

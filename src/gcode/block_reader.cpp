@@ -3,7 +3,9 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
+#include <string>
 
 #include "cutsim/core/error.h"
 
@@ -84,50 +86,58 @@ private:
 };
 
 double LineParser::number(bool* integer_literal) {
+  // Fast path: up to 15 significant digits, the mantissa and the power of
+  // ten are exact doubles, so one division is correctly rounded: the same
+  // value strtod gives. Longer numbers go through std::from_chars.
+  static constexpr double kPow10[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,  1e8,  1e9,  1e10, 1e11,
+                                      1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
   const std::size_t start = i_;
-  char buf[96];
-  std::size_t len = 0;
   bool neg = false;
   if (i_ < n_ && (t_[i_] == '+' || t_[i_] == '-')) {
     neg = t_[i_] == '-';
     ++i_;
     skip_ws();
   }
-  int digits = 0, points = 0;
-  std::size_t total_digits = 0;
+  const std::size_t digits_start = i_;
+  std::uint64_t mant = 0;
+  int sig = 0, frac = 0, digits = 0, points = 0;
   while (i_ < n_) {
     const char c = t_[i_];
     if (is_digit(c)) {
       ++digits;
-      ++total_digits;
-      // Leading zeros carry no value; keep the buffer for significant text.
-      if (!(len == 0 && c == '0' && points == 0)) {
-        if (len >= sizeof(buf) - 2) fail(start, "number with too many digits");
-        buf[len++] = c;
-      }
+      if (sig > 0 || c != '0') ++sig;
+      if (sig <= 19) mant = mant * 10 + static_cast<std::uint64_t>(c - '0');
+      if (points) ++frac;
       ++i_;
     } else if (c == '.') {
       if (++points > 1) fail(i_, "malformed number: second decimal point");
-      if (len >= sizeof(buf) - 2) fail(start, "number with too many digits");
-      buf[len++] = c;
       ++i_;
     } else if (is_space(c)) {
       std::size_t j = i_;
       while (j < n_ && is_space(t_[j])) ++j;
-      if (j < n_ && (is_digit(t_[j]) || (t_[j] == '.' && points == 0))) i_ = j;
-      else break;
+      if (j < n_ && (is_digit(t_[j]) || (t_[j] == '.' && points == 0))) {
+        i_ = j;
+      } else {
+        break;
+      }
     } else {
       break;
     }
   }
   if (digits == 0) fail(start, "expected a number");
   if (integer_literal) *integer_literal = points == 0;
-  double v = 0;
-  if (len > 0 && !(len == 1 && buf[0] == '.')) {
-    const auto r = std::from_chars(buf, buf + len, v);
+  double v;
+  if (sig <= 15 && frac <= 22) {
+    v = static_cast<double>(mant) / kPow10[frac];
+  } else {
+    // Significant text without spaces for from_chars.
+    std::string buf;
+    buf.reserve(i_ - digits_start);
+    for (std::size_t k = digits_start; k < i_; ++k)
+      if (!is_space(t_[k])) buf += t_[k];
+    const auto r = std::from_chars(buf.data(), buf.data() + buf.size(), v);
     if (r.ec != std::errc() || !std::isfinite(v)) fail(start, "number out of range");
   }
-  (void)total_digits;
   return neg ? -v : v;
 }
 
