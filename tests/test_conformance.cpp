@@ -56,8 +56,9 @@ TEST_P(Conformance, MotionMatchesHandCalculation) {
     EXPECT_EQ(a["motion"], e["motion"]);
     for (int k = 0; k < 6; ++k) EXPECT_NEAR(a["end"][k].get<double>(), e["end"][k].get<double>(), 1e-9);
     EXPECT_EQ(a.contains("centre"), e.contains("centre"));
-    if (a.contains("centre") && e.contains("centre"))
+    if (a.contains("centre") && e.contains("centre")) {
       for (int k = 0; k < 3; ++k) EXPECT_NEAR(a["centre"][k].get<double>(), e["centre"][k].get<double>(), 1e-9);
+    }
     EXPECT_NEAR(a["feed_mm_per_min"].get<double>(), e["feed_mm_per_min"].get<double>(), 1e-9);
   }
 }

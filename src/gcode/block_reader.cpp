@@ -381,7 +381,7 @@ void LineParser::oword(Block& b, std::size_t at) {
   } else {
     bool lit = false;
     const double v = real_value(&lit);
-    if (v < 0 || v != std::floor(v)) fail(at, "O-word number must be a non-negative integer");
+    if (v < 0 || v != std::floor(v) || v > 1e15) fail(at, "O-word number must be a non-negative integer");
     char buf[32];
     std::snprintf(buf, sizeof buf, "%.0f", v);
     o.name = buf;

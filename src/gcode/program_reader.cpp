@@ -90,7 +90,9 @@ void ProgramReader::fail(const Block& b, int column, const std::string& msg) con
 bool ProgramReader::read_line(std::string_view& line) {
   if (!src_.next(line)) return false;
   max_line_ = std::max(max_line_, src_.line_number());
-  ++executed_;
+  if (++executed_ > opt_.max_lines_executed && opt_.max_lines_executed > 0)
+    throw ParseError(SourceLocation{file_, src_.line_number(), 0, {}},
+                     "more than " + std::to_string(opt_.max_lines_executed) + " lines executed (a runaway loop?)");
   return true;
 }
 
@@ -208,7 +210,8 @@ void ProgramReader::handle_oword(Block& b) {
       return;
     }
     case OKind::repeat: {
-      const long long count = std::llround(o.value);
+      if (!(o.value < 1e12)) fail(b, o.column, "repeat count too large");
+      const long long count = o.value > 0 ? std::llround(o.value) : 0;
       if (count <= 0) {
         skip_to(o.name, {OKind::endrepeat}, b, scratch_);
         return;
@@ -299,10 +302,11 @@ bool ProgramReader::handle_fanuc_m98_m99(Block& b) {
       fail(b, w.column, "M98/M99 with other words in the block is not supported");
   if (m98) {
     const Word* p = b.find('P');
-    if (!p || p->value < 0 || p->value != std::floor(p->value)) fail(b, m98, "M98 needs P with a program number");
+    if (!p || p->value < 0 || p->value != std::floor(p->value) || p->value > 99999999)
+      fail(b, m98, "M98 needs P with a program number");
     const Word* l = b.find('L');
+    if (l && !(l->value >= 1 && l->value <= 1e9)) fail(b, l->column, "L (repeat count) must be from 1 to 1e9");
     const long long count = l ? std::llround(l->value) : 1;
-    if (count < 1) fail(b, l->column, "L (repeat count) must be at least 1");
     char buf[32];
     std::snprintf(buf, sizeof buf, "%.0f", p->value);
     const LinePosition body = find_program(buf, b);

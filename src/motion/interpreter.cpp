@@ -180,8 +180,8 @@ void Interpreter::execute(const gcode::Block& block, std::vector<Move>& out) {
     state_.spindle_rpm = s->value;
   }
   if (const gcode::Word* t = word('T')) {
-    if (t->value < 0 || t->value != std::floor(t->value))
-      ctx.fail(t->value_column, "tool number must be a non-negative integer");
+    if (t->value < 0 || t->value != std::floor(t->value) || t->value > 999999)
+      ctx.fail(t->value_column, "tool number must be an integer from 0 to 999999");
     state_.tool_selected = static_cast<int>(t->value);
   }
   if (m_by_group[kSpindle]) {
@@ -231,7 +231,8 @@ void Interpreter::execute(const gcode::Block& block, std::vector<Move>& out) {
       const gcode::Word* h = word('H');
       int hv = state_.tool_in_spindle;
       if (h) {
-        if (h->value < 0 || h->value != std::floor(h->value)) ctx.fail(h->value_column, "H must be a non-negative integer");
+        if (h->value < 0 || h->value != std::floor(h->value) || h->value > 999999)
+          ctx.fail(h->value_column, "H must be an integer from 0 to 999999");
         hv = static_cast<int>(h->value);
       }
       state_.length_offset_h = hv;
@@ -383,7 +384,8 @@ void Interpreter::execute(const gcode::Block& block, std::vector<Move>& out) {
         if (axis[a]) ctx.fail(axis[a]->column, "rotary axis words in an arc move are not supported");
       if (g53) ctx.fail(g_col[kNonModal], "G53 with an arc");
       if (const gcode::Word* p = word('P')) {
-        if (p->value < 1 || p->value != std::floor(p->value)) ctx.fail(p->column, "P (turns) must be a positive integer");
+        if (p->value < 1 || p->value != std::floor(p->value) || p->value > 10000)
+          ctx.fail(p->column, "P (turns) must be an integer from 1 to 10000");
         m.turns = static_cast<int>(p->value);
       }
       const double su = cur[u], sv = cur[v], eu = target[u], ev = target[v];

@@ -46,7 +46,11 @@ struct Block {
   }
 };
 
-/// G and M numbers compared as tenths, so G43.4 is 434 and G1 is 10.
-inline int code_tenths(double v) { return static_cast<int>(v * 10.0 + (v >= 0 ? 0.5 : -0.5)); }
+/// G and M numbers compared as tenths, so G43.4 is 434 and G1 is 10; a
+/// value no code can have gives -1.
+inline int code_tenths(double v) {
+  if (!(v >= 0 && v < 1e6)) return -1;
+  return static_cast<int>(v * 10.0 + 0.5);
+}
 
 }  // namespace cutsim::gcode

@@ -20,6 +20,8 @@ struct ReaderOptions {
   bool block_delete = false;   ///< true: skip lines starting with '/'
   int max_call_depth = 64;
   std::size_t max_line_bytes = 1 << 20;
+  /// Refuse to execute more lines than this (loops included); 0: no limit.
+  long long max_lines_executed = 0;
 };
 
 class ProgramReader {

@@ -1,0 +1,66 @@
+#pragma once
+// What the fuzz targets do with one input; shared with the regression test
+// that replays tests/fuzz_regressions/. A cutsim::Error is a correct answer.
+#include <cstddef>
+#include <cstdint>
+#include <cstdio>
+#include <sstream>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+#include "cutsim/core/error.h"
+#include "cutsim/gcode/program_reader.h"
+#include "cutsim/io/job.h"
+#include "cutsim/motion/interpreter.h"
+
+namespace cutsim::fuzz {
+
+/// First byte: bit 0 dialect (1 fanuc), bit 1 block delete; the rest is the program.
+inline void gcode_input(const std::uint8_t* data, std::size_t size) {
+  if (size == 0) return;
+  const auto dialect = (data[0] & 1) ? gcode::Dialect::fanuc : gcode::Dialect::rs274ngc;
+  std::istringstream in(std::string(reinterpret_cast<const char*>(data) + 1, size - 1));
+  gcode::ReaderOptions ro;
+  ro.dialect = dialect;
+  ro.block_delete = (data[0] & 2) != 0;
+  ro.max_lines_executed = 20000;
+  ro.max_line_bytes = 1 << 16;
+  motion::InterpreterOptions io;
+  io.dialect = dialect;
+  try {
+    gcode::ProgramReader reader(in, "fuzz.nc", ro);
+    motion::Interpreter interp("fuzz.nc", io);
+    gcode::Block b;
+    std::vector<motion::Move> moves;
+    while (reader.next(b)) {
+      moves.clear();
+      interp.execute(b, moves);
+      for (const auto& m : moves) {
+        volatile double sink = m.length() + m.path_bounds().volume();
+        (void)sink;
+      }
+    }
+  } catch (const Error&) {
+  }
+}
+
+/// The whole input is a job file; its first 64 bytes also a tool spec.
+inline void job_input(const std::uint8_t* data, std::size_t size) {
+  static const std::string path = "/tmp/cutsim-fuzz-job-" + std::to_string(::getpid()) + ".toml";
+  if (FILE* f = std::fopen(path.c_str(), "wb")) {
+    std::fwrite(data, 1, size, f);
+    std::fclose(f);
+    try {
+      io::load_job(path);
+    } catch (const Error&) {
+    }
+    std::remove(path.c_str());
+  }
+  try {
+    tool::parse_tool_spec(std::string(reinterpret_cast<const char*>(data), size < 64 ? size : 64));
+  } catch (const Error&) {
+  }
+}
+
+}  // namespace cutsim::fuzz
