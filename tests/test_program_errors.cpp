@@ -77,6 +77,21 @@ TEST(ProgramBehaviour, BlockDeleteSkipsSlashLinesOnlyWhenOn) {
   EXPECT_EQ(n, 2);
 }
 
+TEST(ProgramErrors, NulByteIsAnErrorAtItsColumn) {
+  expect_refused(std::string("G0 X0\nG1 X1\0 F1\n", 17), {2, 6, "unexpected control"});
+}
+
+TEST(ProgramBehaviour, HundredKilobyteLineIsRead) {
+  TempDir dir;
+  const auto path = dir.write("p.nc", "G0 X0 (" + std::string(100 * 1024, 'a') + ") Y2\n");
+  int n = 0;
+  sim::check_program(path, {}, {}, [&](const motion::Move& m) {
+    ++n;
+    EXPECT_DOUBLE_EQ(m.end.xyz.y(), 2.0);
+  });
+  EXPECT_EQ(n, 1);
+}
+
 TEST(ProgramBehaviour, LongLineIsRefusedNotRead) {
   TempDir dir;
   const auto path = dir.write("p.nc", "G0 X0\n(" + std::string(2 << 20, 'a') + ")\n");

@@ -110,6 +110,9 @@ SimResult simulate(const SimOptions& opt) {
       throw ParseError(SourceLocation{opt.program, m.line, col, b.text},
                        "rotary axis moves need a multi-axis machine; this run uses the 3-axis xyz machine");
     }
+    if ((m.tool_axis - Vec3::UnitZ()).norm() > 1e-12)
+      throw ParseError(SourceLocation{opt.program, m.line, 1, b.text},
+                       "the tool axis is tilted (G53.1); this run uses the 3-axis xyz machine");
   };
   {
     iopt.initial.xyz = opt.job.start_mm ? *opt.job.start_mm : Vec3(0, 0, 0);
