@@ -7,23 +7,29 @@
 namespace cutsim::gcode {
 
 namespace {
-constexpr std::size_t kChunk = 1 << 20;
+constexpr std::size_t kChunk = 256 << 10;
 }
 
 LineSource::LineSource(std::istream& in, std::string file, std::size_t max_line_bytes)
-    : in_(in), file_(std::move(file)), max_line_(max_line_bytes), buf_(kChunk) {}
+    : in_(in), file_(std::move(file)), max_line_(max_line_bytes) {}
 
 bool LineSource::fill() {
   if (eof_) return false;
   // Keep the unread tail, read more behind it.
   if (pos_ > 0) {
-    std::memmove(buf_.data(), buf_.data() + pos_, end_ - pos_);
+    std::memmove(buf_.get(), buf_.get() + pos_, end_ - pos_);
     base_ += static_cast<std::streamoff>(pos_);
     end_ -= pos_;
     pos_ = 0;
   }
-  if (end_ + kChunk > buf_.size()) buf_.resize(end_ + kChunk);
-  in_.read(buf_.data() + end_, static_cast<std::streamsize>(kChunk));
+  if (end_ + kChunk > cap_) {
+    const std::size_t cap = std::max(end_ + kChunk, 2 * cap_);
+    std::unique_ptr<char[]> bigger(new char[cap]);
+    if (end_) std::memcpy(bigger.get(), buf_.get(), end_);
+    buf_ = std::move(bigger);
+    cap_ = cap;
+  }
+  in_.read(buf_.get() + end_, static_cast<std::streamsize>(kChunk));
   const std::streamsize got = in_.gcount();
   if (in_.bad()) throw InputError(file_, "read error");
   if (got <= 0) {
@@ -38,16 +44,16 @@ bool LineSource::fill() {
 bool LineSource::next(std::string_view& line) {
   std::size_t scan = pos_;
   for (;;) {
-    const void* nl = std::memchr(buf_.data() + scan, '\n', end_ - scan);
+    const void* nl = end_ > scan ? std::memchr(buf_.get() + scan, '\n', end_ - scan) : nullptr;
     if (nl) {
-      const std::size_t e = static_cast<const char*>(nl) - buf_.data();
+      const std::size_t e = static_cast<const char*>(nl) - buf_.get();
       std::size_t len = e - pos_;
       ++line_no_;
       if (len > max_line_)
         throw ParseError(SourceLocation{file_, line_no_, 1, {}},
                          "line is longer than " + std::to_string(max_line_) + " bytes");
       if (len > 0 && buf_[pos_ + len - 1] == '\r') --len;
-      line = std::string_view(buf_.data() + pos_, len);
+      line = std::string_view(buf_.get() + pos_, len);
       pos_ = e + 1;
       return true;
     }
@@ -61,7 +67,7 @@ bool LineSource::next(std::string_view& line) {
       std::size_t len = end_ - pos_;
       ++line_no_;
       if (len > 0 && buf_[pos_ + len - 1] == '\r') --len;
-      line = std::string_view(buf_.data() + pos_, len);
+      line = std::string_view(buf_.get() + pos_, len);
       pos_ = end_;
       return true;
     }

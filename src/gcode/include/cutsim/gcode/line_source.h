@@ -3,6 +3,7 @@
 // be returned to (loops, subroutines). Memory is bounded by the longest line.
 #include <cstddef>
 #include <istream>
+#include <memory>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -35,7 +36,8 @@ private:
   std::istream& in_;
   std::string file_;
   std::size_t max_line_;
-  std::vector<char> buf_;
+  std::unique_ptr<char[]> buf_;  // not zero-filled: a reader is cheap to make
+  std::size_t cap_ = 0;
   std::size_t pos_ = 0, end_ = 0;  // unread bytes are buf_[pos_, end_)
   std::streamoff base_ = 0;        // stream offset of buf_[0]
   bool eof_ = false;
