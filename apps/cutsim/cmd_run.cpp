@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <iostream>
 #include <memory>
+#include <vector>
 
 #include "commands.h"
 #include "cutsim/core/error.h"
@@ -29,6 +30,9 @@ struct RunArgs {
   double mesh_adaptivity = 0.01;
   std::string dialect;
   bool block_delete = false;
+  std::string machine;
+  std::vector<std::string> joint_errors;
+  std::string tool_setting, workpiece_setting, environment;
 };
 }  // namespace
 
@@ -45,6 +49,13 @@ Action add_run_command(CLI::App& app) {
   cmd->add_option("--dialect", args->dialect, "G-code dialect: rs274ngc (default) or fanuc")
       ->check(CLI::IsMember({"rs274ngc", "fanuc"}));
   cmd->add_flag("--block-delete", args->block_delete, "skip lines that start with '/'");
+  cmd->add_option("--machine", args->machine, "machine: preset (xyz, xyza, xyzbc, xzc, flycut) or a .toml file");
+  cmd->add_option("--joint-error", args->joint_errors,
+                  "assembly error of a joint, e.g. A:dy=-0.5,gamma=1e-5 (dx dy dz mm, alpha beta gamma rad); repeatable");
+  cmd->add_option("--tool-setting", args->tool_setting, "setting error of the tool: dx=..,dy=..,dz=..,alpha=..,beta=..,gamma=..");
+  cmd->add_option("--workpiece-setting", args->workpiece_setting, "setting error of the workpiece (same keys)");
+  cmd->add_option("--environment", args->environment,
+                  "environment log CSV (time_s, temperature_c, humidity_pct, pressure_hpa) for laser-scale axes");
   cmd->add_option("--mesh-adaptivity", args->mesh_adaptivity,
                   "0: one quad per surface voxel; 0.01 (default) to 1: merge ever less flat regions into larger polygons")
       ->check(CLI::Range(0.0, 1.0));
@@ -66,6 +77,11 @@ Action add_run_command(CLI::App& app) {
     if (args->voxel > 0) opt.voxel_mm = args->voxel;
     if (!args->dialect.empty()) opt.dialect = io::parse_dialect(args->dialect, "--dialect");
     opt.block_delete = args->block_delete;
+    if (!args->machine.empty()) opt.machine = args->machine;
+    opt.joint_errors = args->joint_errors;
+    if (!args->tool_setting.empty()) opt.tool_setting = args->tool_setting;
+    if (!args->workpiece_setting.empty()) opt.workpiece_setting = args->workpiece_setting;
+    if (!args->environment.empty()) opt.environment = args->environment;
     io::ensure_writable_directory(args->outdir);
 
     ProgressBar bar;

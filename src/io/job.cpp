@@ -1,6 +1,7 @@
 #include "cutsim/io/job.h"
 
 #include <cmath>
+#include <filesystem>
 #include <cstdlib>
 #include <fstream>
 #include <set>
@@ -87,7 +88,35 @@ Job load_job(const std::string& path) {
   }
   Job job;
   job.source = path;
-  ctx.only_keys(root, {"program", "stock", "tool", "simulation"}, "the job");
+  ctx.only_keys(root, {"program", "machine", "stock", "tool", "simulation"}, "the job");
+  if (auto* mt = root["machine"].as_table()) {
+    ctx.only_keys(*mt, {"name", "errors", "tool_setting", "workpiece_setting", "environment"}, "[machine]");
+    const auto dir = std::filesystem::path(path).parent_path();
+    auto str = [&](const char* key) -> std::optional<std::string> {
+      auto* n = mt->get(key);
+      if (!n) return std::nullopt;
+      auto v = n->value<std::string>();
+      if (!v) ctx.fail(n->source(), std::string("[machine] ") + key + " must be a string");
+      return v;
+    };
+    job.machine = str("name");
+    if (job.machine && job.machine->find(".toml") != std::string::npos && std::filesystem::path(*job.machine).is_relative())
+      job.machine = (dir / *job.machine).string();
+    job.tool_setting = str("tool_setting");
+    job.workpiece_setting = str("workpiece_setting");
+    if (auto e = str("environment")) job.environment = std::filesystem::path(*e).is_relative() ? (dir / *e).string() : *e;
+    if (auto* er = mt->get("errors")) {
+      const auto* t = er->as_table();
+      if (!t) ctx.fail(er->source(), "[machine] errors must be a table of AXIS = \"dx=..,dy=..\"");
+      for (const auto& [k, v] : *t) {
+        auto sv = v.value<std::string>();
+        if (!sv) ctx.fail(v.source(), "an error spec must be a string such as \"dy=-0.5\"");
+        job.joint_errors.emplace_back(std::string(k.str()), *sv);
+      }
+    }
+  } else if (root.contains("machine")) {
+    ctx.fail(root.get("machine")->source(), "[machine] must be a table");
+  }
   if (auto* pr = root["program"].as_table()) {
     ctx.only_keys(*pr, {"dialect", "block_delete"}, "[program]");
     if (auto* d = pr->get("dialect")) {

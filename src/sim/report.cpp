@@ -30,6 +30,19 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   j["stock_volume_before_mm3"] = r.stock->initial_volume_mm3();
   j["stock_volume_after_mm3"] = r.stock->volume_mm3();
   j["removed_volume_mm3"] = r.stock->removed_volume_mm3();
+  j["machine"] = r.machine;
+  j["program_time_s"] = r.program_time_s;
+  nlohmann::ordered_json v = nlohmann::ordered_json::array();
+  for (const auto& a : r.axis_limit_violations)
+    v.push_back({{"line", a.line}, {"text", a.text ? *a.text : ""}, {"axis", std::string(1, a.axis)},
+                 {"quantity", a.quantity}, {"value", a.value}, {"limit", a.limit}, {"unit", a.unit}});
+  j["axis_limit_violations"] = v;
+  nlohmann::ordered_json al = nlohmann::ordered_json::array();
+  for (const auto& a : r.amplitude_limits)
+    al.push_back({{"axis", std::string(1, a.axis)}, {"frequency_hz", a.frequency_hz},
+                  {"amplitude_mm", a.amplitude_mm}, {"limited_by", a.limited_by}});
+  j["amplitude_limits"] = al;
+  j["laser_scale"] = {{"applied", r.laser_error_applied}, {"max_error_um", r.max_laser_error_mm * 1000}};
   j["active_voxels"] = st.active_voxels;
   j["leaf_nodes"] = st.leaf_nodes;
   nlohmann::ordered_json w = nlohmann::ordered_json::array();
@@ -47,13 +60,28 @@ std::string report_text(const SimResult& r, const ReportOutputs& out) {
   std::ostringstream os;
   char buf[512];
   for (const auto& n : r.defaults.notes) os << "note: " << n << "\n";
-  std::snprintf(buf, sizeof buf, "%s: %d blocks, %d moves (%d cutting), tool %s, voxel %g mm\n",
-                r.program.c_str(), r.blocks, r.moves, r.cutting_moves, r.tool.name.c_str(), r.voxel_mm);
+  std::snprintf(buf, sizeof buf, "%s: %d blocks, %d moves (%d cutting), machine %s, tool %s, voxel %g mm, program time %.1f s\n",
+                r.program.c_str(), r.blocks, r.moves, r.cutting_moves, r.machine.c_str(), r.tool.name.c_str(),
+                r.voxel_mm, r.program_time_s);
   os << buf;
   std::snprintf(buf, sizeof buf, "stock %.6f mm3 -> %.6f mm3, removed %.6f mm3\n",
                 r.stock->initial_volume_mm3(), r.stock->volume_mm3(), r.stock->removed_volume_mm3());
   os << buf;
   for (const auto& x : r.warnings) os << r.program << ":" << x.line << ": warning: " << x.message << "\n";
+  const std::size_t shown = std::min<std::size_t>(r.axis_limit_violations.size(), 20);
+  for (std::size_t i = 0; i < shown; ++i) {
+    const auto& a = r.axis_limit_violations[i];
+    std::snprintf(buf, sizeof buf, "%s:%d: %c %s %.4g %s over the limit %.4g: %s\n", r.program.c_str(), a.line, a.axis,
+                  a.quantity.c_str(), a.value, a.unit.c_str(), a.limit, a.text ? a.text->c_str() : "");
+    os << buf;
+  }
+  if (r.axis_limit_violations.size() > shown)
+    os << "... and " << r.axis_limit_violations.size() - shown << " more axis-limit violations (see the report)\n";
+  for (const auto& a : r.amplitude_limits) {
+    std::snprintf(buf, sizeof buf, "amplitude limit %c at %.3g Hz: %.4g mm (%s)\n", a.axis, a.frequency_hz,
+                  a.amplitude_mm, a.limited_by.c_str());
+    os << buf;
+  }
   std::snprintf(buf, sizeof buf, "time: parse %.2f s, simulate %.2f s, export %.2f s, total %.2f s; peak RSS %.0f MB\n",
                 r.timing.parse_s, r.timing.simulate_s, r.timing.export_s, r.timing.total_s, peak_rss_mb());
   os << buf;

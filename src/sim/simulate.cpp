@@ -8,6 +8,7 @@
 
 #include "cutsim/core/error.h"
 #include "cutsim/gcode/program_reader.h"
+#include "cutsim/sim/planner.h"
 #include "cutsim/sweep/sweep.h"
 
 namespace cutsim::sim {
@@ -83,6 +84,39 @@ CheckResult check_program(const std::string& program, const ProgramOptions& popt
   });
 }
 
+namespace {
+machine::JointError parse_error_fields(const std::string& text, const std::string& origin) {
+  machine::JointError e;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    const auto eq = item.find('=');
+    if (eq == std::string::npos) throw ConfigError(SourceLocation{origin, 0, 0, {}}, "expected key=value, got '" + item + "'");
+    const std::string k = item.substr(0, eq), v = item.substr(eq + 1);
+    char* end = nullptr;
+    const double d = std::strtod(v.c_str(), &end);
+    if (v.empty() || *end != '\0' || !std::isfinite(d))
+      throw ConfigError(SourceLocation{origin, 0, 0, {}}, "'" + v + "' is not a number");
+    if (k == "dx") e.dx = d; else if (k == "dy") e.dy = d; else if (k == "dz") e.dz = d;
+    else if (k == "alpha") e.alpha = d; else if (k == "beta") e.beta = d; else if (k == "gamma") e.gamma = d;
+    else throw ConfigError(SourceLocation{origin, 0, 0, {}}, "unknown key '" + k + "' (dx dy dz mm, alpha beta gamma rad)");
+  }
+  return e;
+}
+}  // namespace
+
+void apply_joint_error(machine::Machine& m, const std::string& spec, const std::string& origin) {
+  const auto colon = spec.find(':');
+  if (colon != 1) throw ConfigError(SourceLocation{origin, 0, 0, {}}, "joint error '" + spec + "': expected AXIS:key=value,...");
+  const int j = m.joint_of(spec[0]);
+  if (j < 0) throw ConfigError(SourceLocation{origin, 0, 0, {}}, std::string("machine ") + m.name + " has no axis " + spec[0]);
+  m.chain[static_cast<std::size_t>(j)].error = parse_error_fields(spec.substr(2), origin);
+}
+
+Pose parse_setting(const std::string& spec, const std::string& origin) {
+  return parse_error_fields(spec, origin).transform();
+}
+
 SimResult simulate(const SimOptions& opt) {
   const auto t_start = Clock::now();
   SimResult res;
@@ -96,31 +130,41 @@ SimResult simulate(const SimOptions& opt) {
   if (!opt.tool && !opt.job.tool) res.defaults.notes.push_back("tool: ball:d=1 (default; set --tool or [tool] spec)");
   const double tool_r = res.tool.radius();
 
-  // Pass 1: check the whole program and find where the cutting moves go,
-  // before any grid is built or any output written. The start position is
-  // not known yet: X0 Y0 and far above, refined after the stock is known.
+  // The machine, its errors and the air.
+  machine::Machine mach = machine::load_machine(opt.machine ? *opt.machine : opt.job.machine.value_or("xyz"));
+  for (const auto& [axis, spec] : opt.job.joint_errors) apply_joint_error(mach, axis + ":" + spec, opt.job.source);
+  for (const auto& spec : opt.joint_errors) apply_joint_error(mach, spec, "--joint-error");
+  if (opt.job.tool_setting) mach.tool_setting = parse_setting(*opt.job.tool_setting, opt.job.source);
+  if (opt.job.workpiece_setting) mach.workpiece_setting = parse_setting(*opt.job.workpiece_setting, opt.job.source);
+  if (opt.tool_setting) mach.tool_setting = parse_setting(*opt.tool_setting, "--tool-setting");
+  if (opt.workpiece_setting) mach.workpiece_setting = parse_setting(*opt.workpiece_setting, "--workpiece-setting");
+  res.machine = mach.name;
+  const machine::Kinematics kin(mach);
+  machine::EnvironmentLog env;
+  const std::optional<std::string> env_path = opt.environment ? opt.environment : opt.job.environment;
+  if (env_path) env = machine::EnvironmentLog::load_csv(*env_path);
+  bool laser_axes = false;
+  for (const auto& j : mach.chain) laser_axes |= j.laser.has_value();
+  res.laser_error_applied = laser_axes && !env.empty();
+
+  // Pass 1: check the whole program, time it against the machine, find
+  // where the cutting moves go, before any grid is built or output written.
   motion::InterpreterOptions iopt;
   std::optional<Aabb> stock_box = opt.stock_box ? opt.stock_box : opt.job.stock_box;
-  Aabb cut_path;  // tool tip path of feed moves
-  auto check_axes = [&](const motion::Move& m, const gcode::Block& b) {
-    if ((m.end.abc - m.start.abc).cwiseAbs().maxCoeff() > 0) {
-      int col = 1;
-      for (const auto& w : b.words)
-        if (w.letter >= 'A' && w.letter <= 'C') { col = w.column; break; }
-      throw ParseError(SourceLocation{opt.program, m.line, col, b.text},
-                       "rotary axis moves need a multi-axis machine; this run uses the 3-axis xyz machine");
-    }
-    if ((m.tool_axis - Vec3::UnitZ()).norm() > 1e-12)
-      throw ParseError(SourceLocation{opt.program, m.line, 1, b.text},
-                       "the tool axis is tilted (G53.1); this run uses the 3-axis xyz machine");
-  };
+  Aabb cut_path;  // tool tip path of feed moves, workpiece frame
+  Planner::Options plopt;
+  plopt.environment = env.empty() ? nullptr : &env;
   {
     iopt.initial.xyz = opt.job.start_mm ? *opt.job.start_mm : Vec3(0, 0, 0);
-    const CheckResult cr = stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block& b) {
-      check_axes(m, b);
+    Planner planner(kin, iopt.initial, plopt);
+    planner.set_file(opt.program);
+    const CheckResult cr = stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
+      const PlannedMove pm = planner.plan(m);
       if (m.is_cutting_feed()) {
         ++res.cutting_moves;
-        cut_path.extend(m.path_bounds());
+        if (kin.is_identity()) cut_path.extend(m.path_bounds());
+        else
+          for (double s : {0.0, 0.5, 1.0}) cut_path.extend(Vec3(planner.pose_at(m, pm, s).translation()));
       }
     });
     res.blocks = cr.blocks;
@@ -163,8 +207,10 @@ SimResult simulate(const SimOptions& opt) {
     os << "voxel: " << res.voxel_mm << " mm (default: tool radius / 25, at most ~2e7 voxels per layer of cut area; set --voxel)";
     res.defaults.notes.push_back(os.str());
   }
+  // Sampled sweeps stay within a quarter voxel (and 0.1 um) of the true ones.
+  plopt.sweep_tolerance_mm = std::min(1e-4, res.voxel_mm / 4);
 
-  // Region of interest: what the sweeps reach inside the stock.
+  // Region of interest: what the sweeps reach inside the stock; axis limits.
   stock::StockOptions sopt;
   sopt.voxel_mm = res.voxel_mm;
   if (opt.job.memory_limit_mb) sopt.memory_limit_bytes = static_cast<std::size_t>(*opt.job.memory_limit_mb * 1048576.0);
@@ -172,11 +218,28 @@ SimResult simulate(const SimOptions& opt) {
   const Aabb stock_reach = res.stock_box.expanded(margin);
   Aabb roi;
   int total_moves = 0;
-  stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
-    ++total_moves;
-    const Aabb b = sweep::sweep_move(m, res.tool).bounds;
-    if (b.overlaps(stock_reach)) roi.extend(b.intersected(stock_reach));
-  });
+  {
+    Planner planner(kin, iopt.initial, plopt);
+    planner.set_file(opt.program);
+    machine::AxisMonitor mon(mach, machine::joints_of(iopt.initial));
+    stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
+      ++total_moves;
+      const PlannedMove pm = planner.plan(m);
+      planner.monitor(m, pm, mon);
+      const Aabb b = planner.sweep(m, pm, res.tool).bounds;
+      if (b.overlaps(stock_reach)) roi.extend(b.intersected(stock_reach));
+    });
+    res.axis_limit_violations = mon.violations();
+    res.program_time_s = planner.time_s();
+    // Amplitude limits at the frequency of a turning rotary joint (a lathe
+    // spindle under slow tool servo): one undulation per revolution.
+    for (std::size_t j = 0; j < mach.chain.size(); ++j) {
+      if (mach.chain[j].type != machine::JointType::rotary || mon.revolutions(static_cast<int>(j)) < 1) continue;
+      const double f = mon.revolutions(static_cast<int>(j)) / mon.turning_time(static_cast<int>(j));
+      for (const auto& lj : mach.chain)
+        if (lj.type == machine::JointType::linear) res.amplitude_limits.push_back(machine::amplitude_limit(lj, f));
+    }
+  }
   res.timing.parse_s = seconds_since(t_start);
 
   const auto t_sim = Clock::now();
@@ -188,13 +251,16 @@ SimResult simulate(const SimOptions& opt) {
 
   // Pass 2: cut.
   int done = 0;
+  Planner planner(kin, iopt.initial, plopt);
+  planner.set_file(opt.program);
   stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
-    const sweep::Sweep s = sweep::sweep_move(m, res.tool, sweep::SweepOptions{std::min(1e-4, res.voxel_mm / 20)});
-    res.stock->subtract(s);
+    const PlannedMove pm = planner.plan(m);
+    res.stock->subtract(planner.sweep(m, pm, res.tool));
     ++done;
     if (opt.progress && (done % 64 == 0 || done == total_moves))
       opt.progress(static_cast<double>(done) / std::max(total_moves, 1), m.line);
   });
+  res.max_laser_error_mm = planner.max_laser_error_mm();
   res.timing.simulate_s = seconds_since(t_sim);
   return res;
 }

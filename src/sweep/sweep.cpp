@@ -136,11 +136,22 @@ Aabb envelope_box_z(const Vec3& base, const tool::RevolvedEnvelope& e) {
               base + Vec3(R, R, e.core_length + e.corner_radius)};
 }
 
-LinearPrim make_linear(const Vec3& base0, const Vec3& base1, const tool::RevolvedEnvelope& env) {
+// World box of the envelope with its core base at `base` and axis `w`.
+Aabb envelope_box(const Vec3& base, const Vec3& w, const tool::RevolvedEnvelope& e) {
+  Aabb b;
+  b.extend(base);
+  b.extend(base + e.core_length * w);
+  Vec3 pad;
+  for (int k = 0; k < 3; ++k) pad[k] = e.disk_radius * std::sqrt(std::max(0.0, 1 - w[k] * w[k])) + e.corner_radius;
+  return Aabb{b.min - pad, b.max + pad};
+}
+
+LinearPrim make_linear(const Vec3& base0, const Vec3& base1, const tool::RevolvedEnvelope& env,
+                       const Eigen::Matrix3d& R = Eigen::Matrix3d::Identity()) {
   LinearPrim lp;
   lp.origin = base0;
-  lp.to_local.setIdentity();  // tool axis +Z
-  lp.d_local = base1 - base0;
+  lp.to_local = R.transpose();  // rows: the tool frame's axes; the tool axis is local +Z
+  lp.d_local = lp.to_local * (base1 - base0);
   lp.env = env;
   const Vec3& d = lp.d_local;
   const double len = d.norm();
@@ -149,8 +160,9 @@ LinearPrim make_linear(const Vec3& base0, const Vec3& base1, const tool::Revolve
   else if (std::fabs(d.z()) <= 1e-12 * len) lp.kind = LinearPrim::Case::horizontal;
   else if (env.disk_radius == 0) lp.kind = LinearPrim::Case::parallelogram;
   else lp.kind = LinearPrim::Case::general;
-  lp.bounds = envelope_box_z(base0, env);
-  lp.bounds.extend(envelope_box_z(base1, env));
+  const Vec3 w = R.col(2);
+  lp.bounds = envelope_box(base0, w, env);
+  lp.bounds.extend(envelope_box(base1, w, env));
   return lp;
 }
 
@@ -209,6 +221,53 @@ Sweep sweep_move(const motion::Move& m, const tool::Tool& tool, const SweepOptio
         prev = next;
       }
     }
+  }
+  for (const Primitive& p : s.prims) s.bounds.extend(bounds(p));
+  return s;
+}
+
+Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, const tool::Tool& tool) {
+  const tool::RevolvedEnvelope env = tool::cutting_envelope(tool);
+  const Vec3 lift = env.core_offset * R.col(2);
+  Sweep s;
+  s.prims.emplace_back(make_linear(tip0 + lift, tip1 + lift, env, R));
+  s.bounds = bounds(s.prims.front());
+  return s;
+}
+
+Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Tool& tool, double tolerance_mm,
+                  int min_pieces) {
+  const tool::RevolvedEnvelope env = tool::cutting_envelope(tool);
+  const double reach = env.core_offset + env.core_length + env.corner_radius;  // tip to the top of the envelope
+  Sweep s;
+  struct Node { double t0, t1; Pose p0, p1; int depth; };
+  std::vector<Node> stack;
+  const int n0 = std::max(1, min_pieces);
+  std::vector<Pose> poses(static_cast<std::size_t>(n0) + 1);
+  for (int i = 0; i <= n0; ++i) poses[static_cast<std::size_t>(i)] = pose_at(static_cast<double>(i) / n0);
+  for (int i = n0 - 1; i >= 0; --i)
+    stack.push_back({static_cast<double>(i) / n0, static_cast<double>(i + 1) / n0, poses[static_cast<std::size_t>(i)],
+                     poses[static_cast<std::size_t>(i) + 1], 0});
+  while (!stack.empty()) {
+    Node nd = stack.back();
+    stack.pop_back();
+    const double tm = 0.5 * (nd.t0 + nd.t1);
+    const Pose pm = pose_at(tm);
+    const Vec3 a0 = nd.p0.linear().col(2), a1 = nd.p1.linear().col(2), am = pm.linear().col(2);
+    const Vec3 tip_mid = 0.5 * (nd.p0.translation() + nd.p1.translation());
+    const Vec3 top_mid = 0.5 * (nd.p0.translation() + reach * a0 + nd.p1.translation() + reach * a1);
+    const double dev = std::max((pm.translation() - tip_mid).norm(), (pm.translation() + reach * am - top_mid).norm());
+    // Holding the middle orientation over the piece moves the top by at most
+    // reach * (half the turn).
+    const double turn = std::acos(std::clamp(a0.dot(a1), -1.0, 1.0));
+    if ((dev > tolerance_mm || reach * 0.5 * turn > tolerance_mm) && nd.depth < 30) {
+      stack.push_back({tm, nd.t1, pm, nd.p1, nd.depth + 1});
+      stack.push_back({nd.t0, tm, nd.p0, pm, nd.depth + 1});
+      continue;
+    }
+    const Eigen::Matrix3d R = pm.linear();
+    const Vec3 lift = env.core_offset * R.col(2);
+    s.prims.emplace_back(make_linear(nd.p0.translation() + lift, nd.p1.translation() + lift, env, R));
   }
   for (const Primitive& p : s.prims) s.bounds.extend(bounds(p));
   return s;

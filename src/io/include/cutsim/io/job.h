@@ -2,6 +2,8 @@
 // The job file (TOML): stock, tool and simulation settings for a program.
 // Every field is optional; the command line overrides the file.
 #include <optional>
+#include <utility>
+#include <vector>
 #include <string>
 
 #include "cutsim/core/geometry.h"
@@ -19,6 +21,11 @@ struct Job {
   std::optional<double> memory_limit_mb;  ///< [simulation] memory_limit_mb
   std::optional<gcode::Dialect> dialect;  ///< [program] dialect = "rs274ngc" | "fanuc"
   std::optional<bool> block_delete;       ///< [program] block_delete
+  std::optional<std::string> machine;     ///< [machine] name = preset or file
+  std::vector<std::pair<std::string, std::string>> joint_errors;  ///< [machine.errors] A = "dy=-0.5"
+  std::optional<std::string> tool_setting;       ///< [machine] tool_setting = "dz=0.01"
+  std::optional<std::string> workpiece_setting;  ///< [machine] workpiece_setting = "..."
+  std::optional<std::string> environment;        ///< [machine] environment = "env.csv" (beside the job)
 };
 
 /// Reads a job file.

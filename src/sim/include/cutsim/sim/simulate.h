@@ -11,6 +11,8 @@
 #include "cutsim/core/mesh.h"
 #include "cutsim/gcode/block.h"
 #include "cutsim/io/job.h"
+#include "cutsim/machine/axis_monitor.h"
+#include "cutsim/machine/machine.h"
 #include "cutsim/motion/interpreter.h"
 #include "cutsim/stock/stock.h"
 #include "cutsim/tool/tool.h"
@@ -31,6 +33,11 @@ struct SimOptions {
   std::optional<double> voxel_mm;    ///< --voxel
   std::optional<gcode::Dialect> dialect;  ///< --dialect
   bool block_delete = false;         ///< --block-delete
+  std::optional<std::string> machine;          ///< --machine NAME|FILE
+  std::vector<std::string> joint_errors;       ///< --joint-error A:dy=-0.5,gamma=1e-5
+  std::optional<std::string> tool_setting;     ///< --tool-setting dx=..,dy=..,dz=..,alpha=..,beta=..,gamma=..
+  std::optional<std::string> workpiece_setting;  ///< --workpiece-setting (same keys)
+  std::optional<std::string> environment;      ///< --environment log.csv (laser-scale error)
   /// Called with the fraction done (0..1) and the NC line being cut.
   std::function<void(double, int)> progress;
 };
@@ -57,7 +64,19 @@ struct SimResult {
   std::vector<motion::Warning> warnings;
   std::unique_ptr<stock::Stock> stock;
   Timing timing;
+  std::string machine;                          ///< name of the machine used
+  std::vector<machine::AxisViolation> axis_limit_violations;
+  std::vector<machine::AmplitudeLimit> amplitude_limits;
+  double program_time_s = 0;                    ///< from the feeds and the machine's rapids
+  bool laser_error_applied = false;
+  double max_laser_error_mm = 0;
 };
+
+/// Applies `AXIS:key=value,...` to the machine's joint errors and
+/// `key=value,...` setting specs (keys dx dy dz in mm, alpha beta gamma in rad).
+/// @throw ConfigError naming `origin`.
+void apply_joint_error(machine::Machine& m, const std::string& spec, const std::string& origin);
+Pose parse_setting(const std::string& spec, const std::string& origin);
 
 /// Runs the whole simulation.
 /// @throw cutsim::Error subclasses (parse, config, input, geometry).

@@ -7,6 +7,7 @@
 // the boundary of lines and G17 arcs, and a lower bound (never larger than
 // the true depth) elsewhere. Lower bounds are what the stock update needs
 // for its conservative culling.
+#include <functional>
 #include <variant>
 #include <vector>
 
@@ -59,6 +60,18 @@ struct Sweep {
 /// Straight moves and G17 arcs of constant radius and height are exact;
 /// other arcs become chords within `opt.chord_tolerance_mm`.
 Sweep sweep_move(const motion::Move& move, const tool::Tool& tool, const SweepOptions& opt = {});
+
+/// A straight move of the tool tip from `tip0` to `tip1` with the tool frame
+/// rotated by `R` (the tool axis is R's third column). Exact.
+Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, const tool::Tool& tool);
+
+/// A move whose tool pose (tip at the origin, axis +Z) is `pose_at(t)`,
+/// t in [0, 1]: pieces of exact straight sweeps, each holding the pose's
+/// orientation at its middle, bisected until the tip and the top of the
+/// envelope stay within `tolerance_mm` of the chords and the orientation
+/// held moves the top by at most `tolerance_mm`. Starts from `min_pieces`.
+Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Tool& tool, double tolerance_mm,
+                  int min_pieces = 4);
 
 /// A single tool pose (no motion): the envelope at `tip` with axis +Z.
 Sweep tool_at(const Vec3& tip, const tool::Tool& tool);

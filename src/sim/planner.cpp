@@ -1,0 +1,125 @@
+#include "cutsim/sim/planner.h"
+
+#include <cmath>
+
+#include "cutsim/core/error.h"
+
+namespace cutsim::sim {
+
+using machine::JointValues;
+using machine::JointType;
+
+Planner::Planner(const machine::Kinematics& kin, const motion::AxisValues&, Options opt) : kin_(kin), opt_(opt) {
+  if (opt_.environment && !opt_.environment->empty()) n_ref_ = opt_.environment->refractive_index(0.0);
+  bool laser = false;
+  for (const auto& j : kin_.machine().chain) laser |= j.laser.has_value();
+  exact_ = kin_.is_identity() && !(laser && opt_.environment);
+}
+
+PlannedMove Planner::plan(const motion::Move& m) {
+  const auto& mach = kin_.machine();
+  PlannedMove p;
+  p.q0 = machine::joints_of(m.start);
+  p.q1 = machine::joints_of(m.end);
+  // Axes the program moves must exist on the machine.
+  for (int i = 0; i < 6; ++i) {
+    const char axis = "XYZABC"[i];
+    const std::size_t k = static_cast<std::size_t>(i);
+    if (mach.joint_of(axis) < 0 && (p.q1[k] != 0 || p.q0[k] != 0) && (i >= 3 || p.q1[k] != p.q0[k]))
+      throw ParseError(SourceLocation{file_, m.line, 1, m.text ? *m.text : std::string()},
+                       std::string("axis ") + axis + " is not on machine " + mach.name);
+  }
+  if ((m.tool_axis - Vec3::UnitZ()).norm() > 1e-12)
+    throw ParseError(SourceLocation{file_, m.line, 1, m.text ? *m.text : std::string()},
+                     "G53.1 tool axis control needs the rotary axes solved for the tool axis: not supported yet "
+                     "(program the rotary axes)");
+  if (m.tcp) {
+    p.q0 = kin_.solve_tip(m.start.xyz, p.q0);
+    p.q1 = kin_.solve_tip(m.end.xyz, p.q1);
+  }
+  double dt = 0;
+  if (m.duration_s > 0) {
+    dt = m.duration_s;
+  } else if (m.kind == motion::MotionKind::rapid) {
+    for (const auto& j : mach.chain) {
+      const std::size_t i = static_cast<std::size_t>(machine::axis_index(j.axis));
+      const double v = j.max_velocity > 0 ? j.max_velocity * mach.rapid_fraction
+                                          : (j.type == JointType::linear ? 100.0 : 2 * kPi);
+      dt = std::max(dt, std::fabs(p.q1[i] - p.q0[i]) / v);
+    }
+  } else {
+    // Feed on the programmed path; a pure rotary move feeds in deg/min.
+    double len = m.length();
+    if (len < 1e-12) len = rad_to_deg((m.end.abc - m.start.abc).norm());
+    dt = m.feed_mm_per_min > 0 ? len / (m.feed_mm_per_min / 60.0) : 0.0;
+  }
+  p.t0 = time_;
+  p.t1 = time_ + dt;
+  time_ = p.t1;
+  return p;
+}
+
+JointValues Planner::with_laser_error(JointValues q, double t) const {
+  if (!opt_.environment || opt_.environment->empty()) return q;
+  const double n = opt_.environment->refractive_index(t);
+  for (const auto& j : kin_.machine().chain)
+    if (j.laser) {
+      const std::size_t i = static_cast<std::size_t>(machine::axis_index(j.axis));
+      const double e = machine::laser_position_error_mm(n_ref_, n, j.laser->dead_path_mm, q[i] - j.laser->origin_mm);
+      max_laser_ = std::max(max_laser_, std::fabs(e));
+      q[i] += e;
+    }
+  return q;
+}
+
+JointValues Planner::joints_at(const motion::Move& m, const PlannedMove& p, double s) const {
+  JointValues q;
+  for (std::size_t i = 0; i < 6; ++i) q[i] = p.q0[i] + s * (p.q1[i] - p.q0[i]);
+  if (m.tcp) {
+    q = kin_.solve_tip(m.point_at(s), q);
+  } else if (m.is_arc()) {
+    const Vec3 x = m.point_at(s);
+    q[0] = x.x(); q[1] = x.y(); q[2] = x.z();
+  }
+  return with_laser_error(q, p.t0 + s * (p.t1 - p.t0));
+}
+
+Pose Planner::pose_at(const motion::Move& m, const PlannedMove& p, double s) const {
+  return kin_.tool_pose(joints_at(m, p, s));
+}
+
+sweep::Sweep Planner::sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const {
+  if (exact_) return sweep::sweep_move(m, tool, sweep::SweepOptions{opt_.sweep_tolerance_mm});
+  const bool rotary_fixed = (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
+  if (!m.is_arc() && rotary_fixed) {
+    // Rotary joints held: the tool pose is an affine image of the straight
+    // joint motion, so the tip runs a straight line at a fixed orientation.
+    const Pose a = pose_at(m, p, 0.0), b = pose_at(m, p, 1.0);
+    return sweep::sweep_line(a.translation(), b.translation(), a.linear(), tool);
+  }
+  const int pieces = m.is_arc() ? std::max(4, static_cast<int>(std::ceil(std::fabs(m.arc_sweep_angle()) / (kPi / 8)))) : 4;
+  return sweep::sweep_poses([&](double s) { return pose_at(m, p, s); }, tool, opt_.sweep_tolerance_mm, pieces);
+}
+
+void Planner::monitor(const motion::Move& m, const PlannedMove& p, machine::AxisMonitor& mon) const {
+  const bool feed = m.kind != motion::MotionKind::rapid;
+  const bool rotary = (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() > 0;
+  int steps = 1;
+  if (m.is_arc()) steps = std::max(1, static_cast<int>(std::ceil(std::fabs(m.arc_sweep_angle()) / (kPi / 32))));
+  else if (m.tcp && rotary) steps = 8;
+  const double dt = (p.t1 - p.t0) / steps;
+  for (int k = 1; k <= steps; ++k) {
+    JointValues q;
+    const double s = static_cast<double>(k) / steps;
+    for (std::size_t i = 0; i < 6; ++i) q[i] = p.q0[i] + s * (p.q1[i] - p.q0[i]);
+    if (m.tcp) q = kin_.solve_tip(m.point_at(s), q);
+    else if (m.is_arc()) {
+      const Vec3 x = m.point_at(s);
+      q[0] = x.x(); q[1] = x.y(); q[2] = x.z();
+    }
+    mon.step(q, dt, feed, m.line, m.text);
+  }
+  if (!feed) mon.rest();
+}
+
+}  // namespace cutsim::sim
