@@ -18,6 +18,7 @@ struct CheckArgs {
   bool dump = false;
   std::string dialect = "rs274ngc";
   bool block_delete = false;
+  std::string machine;
 };
 }  // namespace
 
@@ -29,6 +30,8 @@ Action add_check_command(CLI::App& app) {
   cmd->add_option("--dialect", args->dialect, "G-code dialect: rs274ngc (default) or fanuc")
       ->check(CLI::IsMember({"rs274ngc", "fanuc"}));
   cmd->add_flag("--block-delete", args->block_delete, "skip lines that start with '/'");
+  cmd->add_option("--machine", args->machine,
+                  "also check axis velocity, acceleration and stroke on this machine (preset or .toml)");
 
   return [args]() -> int {
     if (!std::filesystem::exists(args->program)) throw InputError(args->program, "no such file");
@@ -52,6 +55,19 @@ Action add_check_command(CLI::App& app) {
       std::cerr << args->program << ":" << w.line << ":" << w.column << ": warning: " << w.message << "\n";
     (args->dump ? std::cerr : std::cout) << args->program << ": " << r.blocks << " blocks, " << r.moves
                                          << " moves, no errors\n";
+    if (!args->machine.empty()) {
+      const sim::AxisReport ax = sim::analyze_axes(args->program, popt, args->machine, iopt);
+      std::ostream& os = args->dump ? std::cerr : std::cout;
+      os << "machine " << ax.machine << ": program time " << ax.program_time_s << " s, "
+         << ax.violations.size() << " axis-limit violations\n";
+      for (const auto& a : ax.violations)
+        os << args->program << ":" << a.line << ": " << a.axis << " " << a.quantity << " " << a.value << " " << a.unit
+           << " over the limit " << a.limit << ": " << (a.text ? *a.text : "") << "\n";
+      for (const auto& a : ax.amplitude_limits)
+        os << "amplitude limit " << a.axis << " at " << a.frequency_hz << " Hz: " << a.amplitude_mm << " mm ("
+           << a.limited_by << ")\n";
+      return ax.violations.empty() ? 0 : 1;
+    }
     return 0;
   };
 }

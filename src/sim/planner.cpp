@@ -89,7 +89,7 @@ Pose Planner::pose_at(const motion::Move& m, const PlannedMove& p, double s) con
 }
 
 sweep::Sweep Planner::sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const {
-  if (exact_) return sweep::sweep_move(m, tool, sweep::SweepOptions{opt_.sweep_tolerance_mm});
+  if (exact_) return sweep::sweep_move(m, tool, sweep::SweepOptions{opt_.chord_tolerance_mm});
   const bool rotary_fixed = (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
   if (!m.is_arc() && rotary_fixed) {
     // Rotary joints held: the tool pose is an affine image of the straight
@@ -98,6 +98,23 @@ sweep::Sweep Planner::sweep(const motion::Move& m, const PlannedMove& p, const t
     return sweep::sweep_line(a.translation(), b.translation(), a.linear(), tool);
   }
   const int pieces = m.is_arc() ? std::max(4, static_cast<int>(std::ceil(std::fabs(m.arc_sweep_angle()) / (kPi / 8)))) : 4;
+  if (!opt_.interest.empty()) {
+    // Coarse bound: tips at 64 points, grown by the envelope's reach and
+    // the largest chord sagitta those points can leave.
+    const tool::RevolvedEnvelope env = tool::cutting_envelope(tool);
+    const double reach = env.core_offset + env.core_length + env.corner_radius + env.disk_radius;
+    Aabb b;
+    double step = 0;
+    Vec3 prev = pose_at(m, p, 0.0).translation();
+    b.extend(prev);
+    for (int i = 1; i <= 64; ++i) {
+      const Vec3 t = pose_at(m, p, i / 64.0).translation();
+      step = std::max(step, (t - prev).norm());
+      b.extend(t);
+      prev = t;
+    }
+    if (!b.expanded(reach + step).overlaps(opt_.interest)) return {};
+  }
   return sweep::sweep_poses([&](double s) { return pose_at(m, p, s); }, tool, opt_.sweep_tolerance_mm, pieces);
 }
 

@@ -117,6 +117,39 @@ Pose parse_setting(const std::string& spec, const std::string& origin) {
   return parse_error_fields(spec, origin).transform();
 }
 
+namespace {
+void amplitude_limits_of(const machine::Machine& mach, const machine::AxisMonitor& mon,
+                         std::vector<machine::AmplitudeLimit>& out) {
+  // At the frequency of a turning rotary joint (a lathe spindle under slow
+  // tool servo): one undulation per revolution.
+  for (std::size_t j = 0; j < mach.chain.size(); ++j) {
+    if (mach.chain[j].type != machine::JointType::rotary || mon.revolutions(static_cast<int>(j)) < 1) continue;
+    const double f = mon.revolutions(static_cast<int>(j)) / mon.turning_time(static_cast<int>(j));
+    for (const auto& lj : mach.chain)
+      if (lj.type == machine::JointType::linear) out.push_back(machine::amplitude_limit(lj, f));
+  }
+}
+}  // namespace
+
+AxisReport analyze_axes(const std::string& program, const ProgramOptions& popt, const std::string& machine_name,
+                        const motion::InterpreterOptions& iopt) {
+  const machine::Machine mach = machine::load_machine(machine_name);
+  const machine::Kinematics kin(mach);
+  Planner planner(kin, iopt.initial, {});
+  planner.set_file(program);
+  machine::AxisMonitor mon(mach, machine::joints_of(iopt.initial));
+  AxisReport r;
+  r.machine = mach.name;
+  stream_moves(program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
+    ++r.moves;
+    planner.monitor(m, planner.plan(m), mon);
+  });
+  r.program_time_s = planner.time_s();
+  r.violations = mon.violations();
+  amplitude_limits_of(mach, mon, r.amplitude_limits);
+  return r;
+}
+
 SimResult simulate(const SimOptions& opt) {
   const auto t_start = Clock::now();
   SimResult res;
@@ -207,8 +240,9 @@ SimResult simulate(const SimOptions& opt) {
     os << "voxel: " << res.voxel_mm << " mm (default: tool radius / 25, at most ~2e7 voxels per layer of cut area; set --voxel)";
     res.defaults.notes.push_back(os.str());
   }
-  // Sampled sweeps stay within a quarter voxel (and 0.1 um) of the true ones.
-  plopt.sweep_tolerance_mm = std::min(1e-4, res.voxel_mm / 4);
+  // Sampled sweeps stay within a quarter voxel of the true ones.
+  plopt.sweep_tolerance_mm = res.voxel_mm / 4;
+  plopt.chord_tolerance_mm = std::min(1e-4, res.voxel_mm / 20);
 
   // Region of interest: what the sweeps reach inside the stock; axis limits.
   stock::StockOptions sopt;
@@ -216,6 +250,7 @@ SimResult simulate(const SimOptions& opt) {
   if (opt.job.memory_limit_mb) sopt.memory_limit_bytes = static_cast<std::size_t>(*opt.job.memory_limit_mb * 1048576.0);
   const double margin = (sopt.half_band_voxels + 2) * res.voxel_mm;
   const Aabb stock_reach = res.stock_box.expanded(margin);
+  plopt.interest = stock_reach;
   Aabb roi;
   int total_moves = 0;
   {
@@ -226,19 +261,18 @@ SimResult simulate(const SimOptions& opt) {
       ++total_moves;
       const PlannedMove pm = planner.plan(m);
       planner.monitor(m, pm, mon);
-      const Aabb b = planner.sweep(m, pm, res.tool).bounds;
-      if (b.overlaps(stock_reach)) roi.extend(b.intersected(stock_reach));
+      // Piece by piece: a sampled rotary move's overall box can span the
+      // whole stock while its pieces pass outside it.
+      const sweep::Sweep sw = planner.sweep(m, pm, res.tool);
+      if (!sw.bounds.overlaps(stock_reach)) return;
+      for (const auto& prim : sw.prims) {
+        const Aabb& b = sweep::bounds(prim);
+        if (b.overlaps(stock_reach)) roi.extend(b.intersected(stock_reach));
+      }
     });
     res.axis_limit_violations = mon.violations();
     res.program_time_s = planner.time_s();
-    // Amplitude limits at the frequency of a turning rotary joint (a lathe
-    // spindle under slow tool servo): one undulation per revolution.
-    for (std::size_t j = 0; j < mach.chain.size(); ++j) {
-      if (mach.chain[j].type != machine::JointType::rotary || mon.revolutions(static_cast<int>(j)) < 1) continue;
-      const double f = mon.revolutions(static_cast<int>(j)) / mon.turning_time(static_cast<int>(j));
-      for (const auto& lj : mach.chain)
-        if (lj.type == machine::JointType::linear) res.amplitude_limits.push_back(machine::amplitude_limit(lj, f));
-    }
+    amplitude_limits_of(mach, mon, res.amplitude_limits);
   }
   res.timing.parse_s = seconds_since(t_start);
 

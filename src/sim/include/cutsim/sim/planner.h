@@ -28,6 +28,10 @@ public:
   struct Options {
     const machine::EnvironmentLog* environment = nullptr;  ///< laser-scale error on when set
     double sweep_tolerance_mm = 1e-4;  ///< sampled sweeps stay this close to the true one
+    double chord_tolerance_mm = 1e-4;  ///< arcs swept as chords (exact path): sagitta bound
+    /// Moves whose envelope cannot reach this box get an empty sweep
+    /// (checked on a coarse bound before any sampling); empty box: no check.
+    Aabb interest;
   };
   Planner(const machine::Kinematics& kin, const motion::AxisValues& start, Options opt);
 

@@ -96,6 +96,20 @@ CheckResult check_program(const std::string& program, const ProgramOptions& popt
                           const motion::InterpreterOptions& iopt,
                           const std::function<void(const motion::Move&)>& on_move = {});
 
+/// The program on a machine without cutting: time line and axis limits.
+struct AxisReport {
+  std::string machine;
+  int moves = 0;
+  double program_time_s = 0;
+  std::vector<machine::AxisViolation> violations;
+  std::vector<machine::AmplitudeLimit> amplitude_limits;
+};
+
+/// Plans every move on `machine` (preset or file) and checks its axes.
+/// @throw cutsim::Error subclasses.
+AxisReport analyze_axes(const std::string& program, const ProgramOptions& popt, const std::string& machine,
+                        const motion::InterpreterOptions& iopt = {});
+
 /// Peak resident set size of this process, MiB.
 double peak_rss_mb();
 
