@@ -51,7 +51,9 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   j["defaults"] = r.defaults.notes;
   j["outputs"] = {{"glb", out.glb}, {"report", out.report}};
   j["timing_s"] = {{"parse", r.timing.parse_s}, {"simulate", r.timing.simulate_s},
-                   {"export", r.timing.export_s}, {"total", r.timing.total_s}};
+                   {"export", r.timing.export_s}, {"total", r.timing.total_s},
+                   {"stock_build", r.timing.stock_build_s}, {"plan_and_sweep", r.timing.plan_sweep_s},
+                   {"stock_update", r.timing.stock_update_s}};
   j["peak_rss_mb"] = peak_rss_mb();
   return j.dump(2) + "\n";
 }

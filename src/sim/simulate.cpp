@@ -282,14 +282,20 @@ SimResult simulate(const SimOptions& opt) {
     roi = Aabb{res.stock_box.max - Vec3::Constant(margin), res.stock_box.max};
   }
   res.stock = std::make_unique<stock::Stock>(res.stock_box, roi.expanded(margin), sopt);
+  res.timing.stock_build_s = seconds_since(t_sim);
 
   // Pass 2: cut.
   int done = 0;
   Planner planner(kin, iopt.initial, plopt);
   planner.set_file(opt.program);
   stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
+    const auto t0 = Clock::now();
     const PlannedMove pm = planner.plan(m);
-    res.stock->subtract(planner.sweep(m, pm, res.tool));
+    const sweep::Sweep sw = planner.sweep(m, pm, res.tool);
+    const auto t1 = Clock::now();
+    res.stock->subtract(sw);
+    res.timing.plan_sweep_s += std::chrono::duration<double>(t1 - t0).count();
+    res.timing.stock_update_s += seconds_since(t1);
     ++done;
     if (opt.progress && (done % 64 == 0 || done == total_moves))
       opt.progress(static_cast<double>(done) / std::max(total_moves, 1), m.line);

@@ -49,6 +49,9 @@ struct Defaults {
 
 struct Timing {
   double parse_s = 0, simulate_s = 0, export_s = 0, total_s = 0;
+  double stock_build_s = 0;   ///< part of simulate_s: filling the grid
+  double plan_sweep_s = 0;    ///< part of simulate_s: kinematics, planning and sweep construction
+  double stock_update_s = 0;  ///< part of simulate_s: subtracting sweeps from the grid
 };
 
 struct SimResult {
