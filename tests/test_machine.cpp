@@ -126,6 +126,39 @@ TEST(Seeds003, FacesCutAtA0AndA180EndUpTwiceTheAssemblyErrorApart) {
   EXPECT_NEAR(without.second - without.first, 0.0, h);
 }
 
+TEST(SettingError, WorkpieceSetHigherIsCutDeeper) {
+  // The workpiece sits 10 um higher on the table than the job assumes: the
+  // same pass cuts 10 um deeper into it.
+  auto height = [](const std::string& setting) {
+    TempDir dir;
+    sim::SimOptions o;
+    o.program = dir.write("p.nc", "G0 X-1 Y0 Z1\nG1 Z-0.05 F100\nG1 X1\nG0 Z1\n");
+    o.tool = tool::parse_tool_spec("flat:d=1");
+    o.stock_box = Aabb{Vec3(-2, -1, -1), Vec3(2, 1, 0)};
+    o.voxel_mm = 0.002;
+    if (!setting.empty()) o.workpiece_setting = setting;
+    return sim::simulate(o).stock->surface_height(0, 0, 0.5);
+  };
+  EXPECT_NEAR(height(""), -0.05, 2e-4);
+  EXPECT_NEAR(height("dz=0.01"), -0.06, 2e-4);
+}
+
+TEST(Cli, CheckWithAMachineFlagsTheLineAndExitsOne) {
+  TempDir dir;
+  // A 0.2 mm X step in 1/240 s between steady blocks on the xzc lathe.
+  std::string prog = "G21 G90\nG0 X10 Z0 C0\nG93\n";
+  for (int k = 1; k <= 20; ++k)
+    prog += "G1 X" + std::to_string(10 - 0.001 * k + (k == 10 ? 0.2 : 0.0)) + " C" + std::to_string(3 * k) + " F14400\n";
+  const auto p = dir.write("sts.nc", prog);
+  std::string out;
+  EXPECT_EQ(run_cli("check " + p + " --machine xzc", &out), 1);
+  EXPECT_NE(out.find("sts.nc:13: X acceleration"), std::string::npos) << out;
+  EXPECT_NE(out.find("sts.nc:14: X acceleration"), std::string::npos) << out;
+  EXPECT_NE(out.find("sts.nc:15: X acceleration"), std::string::npos) << out << "the velocity steps back here";
+  EXPECT_EQ(out.find("sts.nc:12: X"), std::string::npos) << out;
+  EXPECT_EQ(out.find("sts.nc:16: X"), std::string::npos) << out;
+}
+
 TEST(Edlen, StandardAirAndSensitivities) {
   // Reference values worked from seeds/000 eq. 2 outside cutsim.
   const double n0 = machine::edlen_refractive_index(20, 50, 1013.25);
