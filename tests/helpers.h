@@ -48,6 +48,8 @@ inline sim::SimResult run_program(const TempDir& dir, const std::string& program
 
 /// Runs the cutsim binary; returns the exit code, fills stdout and stderr.
 int run_cli(const std::string& args, std::string* out = nullptr, std::string* err = nullptr);
+/// Runs a whole command line (for wrappers such as timeout).
+int run_cli_raw(const std::string& command, std::string* out = nullptr, std::string* err = nullptr);
 
 inline std::string slurp(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

@@ -11,10 +11,14 @@
 namespace cutsim::test {
 
 int run_cli(const std::string& args, std::string* out, std::string* err) {
+  return run_cli_raw(std::string(CUTSIM_BIN) + " " + args, out, err);
+}
+
+int run_cli_raw(const std::string& command, std::string* out, std::string* err) {
   char tmpl[] = "/tmp/cutsim-cli-XXXXXX";
   const std::string cap = ::mkdtemp(tmpl);
   const std::string o = cap + "/stdout", e = cap + "/stderr";
-  const std::string cmd = std::string(CUTSIM_BIN) + " " + args + " >" + o + " 2>" + e + " </dev/null";
+  const std::string cmd = command + " >" + o + " 2>" + e + " </dev/null";
   const int status = std::system(cmd.c_str());
   if (out) *out = slurp(o);
   if (err) *err = slurp(e);

@@ -33,6 +33,7 @@ struct RunArgs {
   std::string machine;
   std::vector<std::string> joint_errors;
   std::string tool_setting, workpiece_setting, environment;
+  bool partial = false;
 };
 }  // namespace
 
@@ -56,6 +57,9 @@ Action add_run_command(CLI::App& app) {
   cmd->add_option("--workpiece-setting", args->workpiece_setting, "setting error of the workpiece (same keys)");
   cmd->add_option("--environment", args->environment,
                   "environment log CSV (time_s, temperature_c, humidity_pct, pressure_hpa) for laser-scale axes");
+  cmd->add_flag("--partial", args->partial,
+                "on Ctrl-C or SIGTERM while cutting, write what was cut so far as <stem>.partial.glb and "
+                "<stem>.partial.report.json (default: write nothing)");
   cmd->add_option("--mesh-adaptivity", args->mesh_adaptivity,
                   "0: one quad per surface voxel; 0.01 (default) to 1: merge ever less flat regions into larger polygons")
       ->check(CLI::Range(0.0, 1.0));
@@ -82,6 +86,7 @@ Action add_run_command(CLI::App& app) {
     if (!args->tool_setting.empty()) opt.tool_setting = args->tool_setting;
     if (!args->workpiece_setting.empty()) opt.workpiece_setting = args->workpiece_setting;
     if (!args->environment.empty()) opt.environment = args->environment;
+    opt.keep_partial = args->partial;
     io::ensure_writable_directory(args->outdir);
 
     ProgressBar bar;
@@ -89,7 +94,7 @@ Action add_run_command(CLI::App& app) {
     sim::SimResult res = sim::simulate(opt);
     bar.finish();
 
-    const std::string stem = fs::path(opt.program).stem().string();
+    const std::string stem = fs::path(opt.program).stem().string() + (res.interrupted ? ".partial" : "");
     sim::ReportOutputs out;
     out.glb = (fs::path(args->outdir) / (stem + ".glb")).string();
     out.report = (fs::path(args->outdir) / (stem + ".report.json")).string();
@@ -109,6 +114,10 @@ Action add_run_command(CLI::App& app) {
     }
     if (args->format == "json") std::cout << json;
     else std::cout << sim::report_text(res, out);
+    if (res.interrupted) {
+      std::cerr << res.interrupt_message << "\npartial result written (" << out.glb << ")\n";
+      return res.interrupt_status;
+    }
     return 0;
   };
 }

@@ -1,11 +1,28 @@
 // cutsim: a cutting simulator for ultra-precision machining.
+#include <csignal>
 #include <cstdio>
 #include <iostream>
+
+#include "cutsim/core/interrupt.h"
 
 #include "commands.h"
 #include "cutsim/core/error.h"
 
+namespace {
+// Records the signal; a second one kills as usual (SA_RESETHAND).
+void on_signal(int sig) { cutsim::interrupt_signal().store(sig); }
+void install_handlers() {
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = SA_RESETHAND;
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+}
+}  // namespace
+
 int main(int argc, char** argv) {
+  install_handlers();
   CLI::App app{"cutsim: simulate an NC program's cuts in a voxel stock"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "cutsim 0.1.0");
@@ -26,6 +43,10 @@ int main(int argc, char** argv) {
   try {
     if (app.got_subcommand("run")) return run();
     if (app.got_subcommand("check")) return check();
+  } catch (const cutsim::InterruptedError& e) {
+    std::cout.flush();
+    std::cerr << e.format() << "\nno output written\n";
+    return e.exit_status();
   } catch (const cutsim::Error& e) {
     std::cout.flush();
     std::cerr << e.format() << "\n";

@@ -1,6 +1,12 @@
 #include "cutsim/core/error.h"
+#include "cutsim/core/interrupt.h"
 
 namespace cutsim {
+
+std::atomic<int>& interrupt_signal() {
+  static std::atomic<int> sig{0};
+  return sig;
+}
 
 namespace {
 std::string compose(const SourceLocation& w, const std::string& message) {

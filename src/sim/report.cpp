@@ -17,6 +17,11 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   nlohmann::ordered_json j;
   const auto st = r.stock->stats();
   j["program"] = r.program;
+  if (r.interrupted) {
+    j["partial"] = true;
+    j["stopped_after_line"] = r.last_line_cut;
+    j["interrupted"] = r.interrupt_message;
+  }
   j["blocks"] = r.blocks;
   j["lines"] = r.lines;
   j["moves"] = r.moves;

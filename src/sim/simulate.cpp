@@ -7,6 +7,7 @@
 #include <sys/resource.h>
 
 #include "cutsim/core/error.h"
+#include "cutsim/core/interrupt.h"
 #include "cutsim/gcode/program_reader.h"
 #include "cutsim/sim/planner.h"
 #include "cutsim/sweep/sweep.h"
@@ -41,6 +42,9 @@ CheckResult stream_moves(const std::string& path, const ProgramOptions& popt, co
   std::vector<motion::Move> moves;
   CheckResult r;
   while (reader.next(block)) {
+    if (interrupted())
+      throw InterruptedError(SourceLocation{path, block.line, 0, block.text}, interrupt_signal().load(),
+                             "interrupted while reading line " + std::to_string(block.line));
     ++r.blocks;
     moves.clear();
     interp.execute(block, moves);
@@ -288,6 +292,7 @@ SimResult simulate(const SimOptions& opt) {
   int done = 0;
   Planner planner(kin, iopt.initial, plopt);
   planner.set_file(opt.program);
+  try {
   stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
     const auto t0 = Clock::now();
     const PlannedMove pm = planner.plan(m);
@@ -296,10 +301,20 @@ SimResult simulate(const SimOptions& opt) {
     res.stock->subtract(sw);
     res.timing.plan_sweep_s += std::chrono::duration<double>(t1 - t0).count();
     res.timing.stock_update_s += seconds_since(t1);
+    if (interrupted())
+      throw InterruptedError(SourceLocation{opt.program, m.line, 0, m.text ? *m.text : std::string()},
+                             interrupt_signal().load(), "interrupted while cutting line " + std::to_string(m.line));
     ++done;
+    res.last_line_cut = m.line;
     if (opt.progress && (done % 64 == 0 || done == total_moves))
       opt.progress(static_cast<double>(done) / std::max(total_moves, 1), m.line);
   });
+  } catch (const InterruptedError& e) {
+    if (!opt.keep_partial) throw;
+    res.interrupted = true;
+    res.interrupt_message = e.what();
+    res.interrupt_status = e.exit_status();
+  }
   res.max_laser_error_mm = planner.max_laser_error_mm();
   res.timing.simulate_s = seconds_since(t_sim);
   return res;

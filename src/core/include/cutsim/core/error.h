@@ -17,6 +17,7 @@ enum class ExitCode : int {
   software = 70,     ///< internal error
   cannot_create = 73,///< an output file or directory cannot be created
   config = 78,       ///< bad job, tool or machine configuration
+  interrupted = 130, ///< stopped by SIGINT (143 for SIGTERM: 128 + signal)
 };
 
 /// A place in an input file; line and column are 1-based, 0 means "none".
@@ -77,6 +78,17 @@ class GeometryError : public Error {
 public:
   GeometryError(SourceLocation where, const std::string& message)
       : Error(ExitCode::data, std::move(where), message) {}
+};
+
+/// The run was stopped by a signal; exit 128 + signal.
+class InterruptedError : public Error {
+public:
+  InterruptedError(SourceLocation where, int signal, const std::string& message)
+      : Error(ExitCode::interrupted, std::move(where), message), signal_(signal) {}
+  int exit_status() const { return 128 + signal_; }
+
+private:
+  int signal_;
 };
 
 /// Command-line misuse; exit 64.

@@ -38,6 +38,9 @@ struct SimOptions {
   std::optional<std::string> tool_setting;     ///< --tool-setting dx=..,dy=..,dz=..,alpha=..,beta=..,gamma=..
   std::optional<std::string> workpiece_setting;  ///< --workpiece-setting (same keys)
   std::optional<std::string> environment;      ///< --environment log.csv (laser-scale error)
+  /// On interruption while cutting, return what was cut so far (marked
+  /// `interrupted`) instead of throwing InterruptedError.
+  bool keep_partial = false;
   /// Called with the fraction done (0..1) and the NC line being cut.
   std::function<void(double, int)> progress;
 };
@@ -73,6 +76,10 @@ struct SimResult {
   double program_time_s = 0;                    ///< from the feeds and the machine's rapids
   bool laser_error_applied = false;
   double max_laser_error_mm = 0;
+  int last_line_cut = 0;                        ///< NC line of the last move subtracted
+  bool interrupted = false;                     ///< stopped early (keep_partial)
+  std::string interrupt_message;
+  int interrupt_status = 0;                     ///< exit status the CLI returns
 };
 
 /// Applies `AXIS:key=value,...` to the machine's joint errors and
