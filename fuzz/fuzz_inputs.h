@@ -12,6 +12,8 @@
 #include "cutsim/core/error.h"
 #include "cutsim/gcode/program_reader.h"
 #include "cutsim/io/job.h"
+#include "cutsim/machine/environment.h"
+#include "cutsim/machine/kinematics.h"
 #include "cutsim/motion/interpreter.h"
 
 namespace cutsim::fuzz {
@@ -61,6 +63,42 @@ inline void job_input(const std::uint8_t* data, std::size_t size) {
     tool::parse_tool_spec(std::string(reinterpret_cast<const char*>(data), size < 64 ? size : 64));
   } catch (const Error&) {
   }
+}
+
+namespace detail {
+inline std::string write_temp(const char* what, const std::uint8_t* data, std::size_t size) {
+  const std::string path = std::string("/tmp/cutsim-fuzz-") + what + "-" + std::to_string(::getpid());
+  if (FILE* f = std::fopen(path.c_str(), "wb")) {
+    std::fwrite(data, 1, size, f);
+    std::fclose(f);
+  }
+  return path;
+}
+}  // namespace detail
+
+/// The whole input is a machine file; a loaded machine is run through its
+/// kinematics at a few joint values.
+inline void machine_input(const std::uint8_t* data, std::size_t size) {
+  const std::string path = detail::write_temp("machine.toml", data, size);
+  try {
+    const machine::Kinematics k(machine::load_machine(path));
+    for (double v : {0.0, 1.0, -2.5})
+      (void)k.tool_pose({v, v, v, v, v, v});
+    (void)k.solve_tip(Vec3(1, 2, 3), {0, 0, 0, 0.1, 0.2, 0.3});
+  } catch (const Error&) {
+  }
+  std::remove(path.c_str());
+}
+
+/// The whole input is an environment log (CSV).
+inline void environment_input(const std::uint8_t* data, std::size_t size) {
+  const std::string path = detail::write_temp("env.csv", data, size);
+  try {
+    const auto log = machine::EnvironmentLog::load_csv(path);
+    for (double t : {-1.0, 0.0, 1.5, 1e9}) (void)log.refractive_index(t);
+  } catch (const Error&) {
+  }
+  std::remove(path.c_str());
 }
 
 }  // namespace cutsim::fuzz

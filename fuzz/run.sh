@@ -13,18 +13,20 @@ if ! command -v clang++ >/dev/null || [ ! -e /usr/lib/llvm-14/lib/clang/14.0.6/l
 fi
 cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ \
   -DCUTSIM_FUZZ=ON -DCUTSIM_BUILD_TESTS=OFF -DCUTSIM_BUILD_BENCH=OFF >/dev/null
-cmake --build build-fuzz --target fuzz_gcode fuzz_job
-mkdir -p build-fuzz/artifacts build-fuzz/corpus/gcode build-fuzz/corpus/job
+cmake --build build-fuzz --target fuzz_gcode fuzz_job fuzz_machine fuzz_environment
+mkdir -p build-fuzz/artifacts build-fuzz/corpus/gcode build-fuzz/corpus/job build-fuzz/corpus/machine build-fuzz/corpus/environment
 # Seeds for the G-code target carry a first byte choosing dialect and block delete.
 for f in tests/conformance/*.nc ncprograms/*.nc; do
   d=0; grep -q fanuc "${f%.nc}.expected" 2>/dev/null && d=1
   { printf "\\x0$d"; cat "$f"; } > "build-fuzz/corpus/gcode/seed-$(basename "$f")"
 done
 cp ncprograms/*.toml build-fuzz/corpus/job/ 2>/dev/null || true
+cp models/machines/*.toml build-fuzz/corpus/machine/
+printf 'time_s,temperature_c,humidity_pct,pressure_hpa\n0,20,50,1013.25\n60,20.1,49,1013.6\n' > build-fuzz/corpus/environment/seed.csv
 status=0
-for t in gcode job; do
+for t in gcode job machine environment; do
   echo "fuzz_$t: ${SECONDS_EACH}s"
-  ./build-fuzz/fuzz/fuzz_$t -max_total_time="$SECONDS_EACH" -timeout=10 -rss_limit_mb=2048 -max_len=4096 \
+  ./build-fuzz/fuzz/fuzz_$t -max_total_time="$SECONDS_EACH" -timeout=10 -rss_limit_mb=2048 -max_len=4096 -use_value_profile=1 \
     -artifact_prefix=build-fuzz/artifacts/$t- -print_final_stats=1 \
     build-fuzz/corpus/$t tests/fuzz_regressions/$t 2>&1 | grep -E 'stat::number_of_executed_units|ERROR|SUMMARY|Test unit written' || status=$?
   if ls build-fuzz/artifacts/$t-* >/dev/null 2>&1; then echo "fuzz_$t: crashes in build-fuzz/artifacts/"; status=1; fi

@@ -24,6 +24,8 @@ std::size_t replay(const std::string& target, void (*run)(const std::uint8_t*, s
 
 TEST(FuzzRegressions, GcodeInputsEndInAnAnswer) { EXPECT_GE(replay("gcode", &fuzz::gcode_input), 4u); }
 TEST(FuzzRegressions, JobInputsEndInAnAnswer) { EXPECT_GE(replay("job", &fuzz::job_input), 1u); }
+TEST(FuzzRegressions, MachineInputsEndInAnAnswer) { EXPECT_GE(replay("machine", &fuzz::machine_input), 1u); }
+TEST(FuzzRegressions, EnvironmentInputsEndInAnAnswer) { EXPECT_GE(replay("environment", &fuzz::environment_input), 1u); }
 
 }  // namespace
 }  // namespace cutsim::test

@@ -22,9 +22,10 @@ std::string long_program() {
   return p + "G0 Z1\nM30\n";
 }
 
-double run_interrupted(const std::string& args, int* code, std::string* err) {
+double run_interrupted(const std::string& args, int* code, std::string* err, double after_s = 1.0) {
   const auto t0 = std::chrono::steady_clock::now();
-  *code = run_cli_raw("timeout --preserve-status -s INT 1.0 " + std::string(CUTSIM_BIN) + " " + args, nullptr, err);
+  *code = run_cli_raw("timeout --preserve-status -s INT " + std::to_string(after_s) + " " + std::string(CUTSIM_BIN) + " " + args,
+                      nullptr, err);
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
@@ -47,8 +48,10 @@ TEST(Interrupt, PartialWritesAMarkedResult) {
   const auto prog = dir.write("long.nc", long_program());
   int code = 0;
   std::string err;
+  // Late enough that cutting has begun even on a loaded machine (the
+  // program cuts for 20 s or more).
   run_interrupted("run " + prog + " --partial --tool ball:d=0.5 --stock-box -0.5,-0.5,-0.5,1.1,1.1,0 --voxel 0.001 -o " +
-                      dir.file("out"), &code, &err);
+                      dir.file("out"), &code, &err, 2.5);
   EXPECT_EQ(code, 130) << err;
   ASSERT_TRUE(fs::exists(dir.file("out/long.partial.report.json"))) << err;
   EXPECT_TRUE(fs::exists(dir.file("out/long.partial.glb")));

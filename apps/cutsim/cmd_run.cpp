@@ -3,7 +3,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <array>
+#include <cmath>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "commands.h"
@@ -34,7 +37,29 @@ struct RunArgs {
   std::vector<std::string> joint_errors;
   std::string tool_setting, workpiece_setting, environment;
   bool partial = false;
+  std::string target;
+  double tolerance = -1;
 };
+
+// Deviation colours, linear RGB: overcut red, undercut blue, within the
+// tolerance neutral; the saturation grows with the deviation.
+std::vector<std::array<float, 4>> deviation_colors(const std::vector<float>& dev, double tol, double max_over,
+                                                   double max_under) {
+  std::vector<std::array<float, 4>> c(dev.size());
+  for (std::size_t i = 0; i < dev.size(); ++i) {
+    const double d = dev[i];
+    if (std::fabs(d) <= tol) {
+      c[i] = {0.55f, 0.55f, 0.55f, 1.0f};
+    } else if (d < 0) {
+      const float t = static_cast<float>(std::min(1.0, (-d - tol) / std::max(max_over - tol, 1e-12)));
+      c[i] = {0.9f, 0.45f * (1 - t), 0.45f * (1 - t), 1.0f};
+    } else {
+      const float t = static_cast<float>(std::min(1.0, (d - tol) / std::max(max_under - tol, 1e-12)));
+      c[i] = {0.45f * (1 - t), 0.45f * (1 - t), 0.9f, 1.0f};
+    }
+  }
+  return c;
+}
 }  // namespace
 
 Action add_run_command(CLI::App& app) {
@@ -60,6 +85,9 @@ Action add_run_command(CLI::App& app) {
   cmd->add_flag("--partial", args->partial,
                 "on Ctrl-C or SIGTERM while cutting, write what was cut so far as <stem>.partial.glb and "
                 "<stem>.partial.report.json (default: write nothing)");
+  cmd->add_option("--target", args->target, "target (design) mesh: STL, OBJ, PLY, glTF or glb, in the workpiece frame");
+  cmd->add_option("--tolerance", args->tolerance, "deviation band counted as in tolerance, mm (default 0.001)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--mesh-adaptivity", args->mesh_adaptivity,
                   "0: one quad per surface voxel; 0.01 (default) to 1: merge ever less flat regions into larger polygons")
       ->check(CLI::Range(0.0, 1.0));
@@ -87,6 +115,14 @@ Action add_run_command(CLI::App& app) {
     if (!args->workpiece_setting.empty()) opt.workpiece_setting = args->workpiece_setting;
     if (!args->environment.empty()) opt.environment = args->environment;
     opt.keep_partial = args->partial;
+    // The target is read and checked before any simulation.
+    std::optional<TriMesh> target_mesh;
+    const std::string target_file = !args->target.empty() ? args->target : opt.job.target.value_or("");
+    if (!target_file.empty())
+      target_mesh = args->target.empty()
+                        ? sim::load_target(target_file, opt.job.target_scale, opt.job.target_rotate_deg, opt.job.target_offset_mm)
+                        : sim::load_target(target_file, 1.0, Vec3::Zero(), Vec3::Zero());
+    const double tolerance = args->tolerance >= 0 ? args->tolerance : opt.job.tolerance_mm.value_or(0.001);
     io::ensure_writable_directory(args->outdir);
 
     ProgressBar bar;
@@ -101,7 +137,22 @@ Action add_run_command(CLI::App& app) {
 
     const auto t_exp = std::chrono::steady_clock::now();
     const TriMesh mesh = res.stock->surface_mesh(args->mesh_adaptivity);
-    io::write_glb(out.glb, {io::GltfPart{"machined_stock", &mesh, {0.75f, 0.75f, 0.78f, 1.0f}}});
+    io::GltfPart part{"machined_stock", &mesh, {0.75f, 0.75f, 0.78f, 1.0f}};
+    io::GltfOptions gopt;
+    std::vector<std::array<float, 4>> colors;
+    if (target_mesh) {
+      const compare::Target target(std::move(*target_mesh));
+      res.comparison = compare::compare(*res.stock, target, mesh, compare::CompareOptions{tolerance});
+      const auto& c = *res.comparison;
+      colors = deviation_colors(c.vertex_deviation_mm, tolerance, c.max_overcut_mm, c.max_undercut_mm);
+      part.colors = &colors;
+      part.deviation_mm = &c.vertex_deviation_mm;
+      gopt.extras_text = {{"colour_scale", "COLOR_0: red overcut, blue undercut, grey within +-tolerance; "
+                                           "_DEVIATION: signed distance to the target in mm, + undercut, - overcut"}};
+      gopt.extras_number = {{"tolerance_mm", tolerance}, {"max_overcut_mm", c.max_overcut_mm},
+                            {"max_undercut_mm", c.max_undercut_mm}};
+    }
+    io::write_glb(out.glb, {part}, gopt);
     res.timing.export_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_exp).count();
     res.timing.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const std::string json = sim::report_json(res, out);

@@ -95,6 +95,24 @@ std::string glb_bytes(const std::vector<GltfPart>& parts, const GltfOptions& opt
       model.accessors.push_back(a);
       prim.attributes["NORMAL"] = static_cast<int>(model.accessors.size() - 1);
     }
+    auto add_attribute = [&](const std::string& name, const std::vector<float>& data, int type, std::size_t count) {
+      const std::size_t off = append(buf, data.data(), data.size() * sizeof(float));
+      tinygltf::Accessor a;
+      a.bufferView = add_view(model, off, data.size() * sizeof(float), TINYGLTF_TARGET_ARRAY_BUFFER);
+      a.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+      a.count = count;
+      a.type = type;
+      model.accessors.push_back(a);
+      prim.attributes[name] = static_cast<int>(model.accessors.size() - 1);
+    };
+    if (part.colors && part.colors->size() == mesh.positions.size()) {
+      std::vector<float> c;
+      c.reserve(4 * part.colors->size());
+      for (const auto& v : *part.colors) c.insert(c.end(), v.begin(), v.end());
+      add_attribute("COLOR_0", c, TINYGLTF_TYPE_VEC4, part.colors->size());
+    }
+    if (part.deviation_mm && part.deviation_mm->size() == mesh.positions.size())
+      add_attribute("_DEVIATION", *part.deviation_mm, TINYGLTF_TYPE_SCALAR, part.deviation_mm->size());
     {
       const std::size_t off = append(buf, idx.data(), idx.size() * sizeof(std::uint32_t));
       tinygltf::Accessor a;
@@ -109,6 +127,7 @@ std::string glb_bytes(const std::vector<GltfPart>& parts, const GltfOptions& opt
     mat.name = part.name;
     mat.pbrMetallicRoughness.baseColorFactor = {part.base_color[0], part.base_color[1],
                                                 part.base_color[2], part.base_color[3]};
+    if (part.colors) mat.pbrMetallicRoughness.baseColorFactor = {1, 1, 1, 1};  // COLOR_0 carries the colour
     mat.pbrMetallicRoughness.metallicFactor = 0.3;
     mat.pbrMetallicRoughness.roughnessFactor = 0.5;
     model.materials.push_back(mat);
@@ -133,6 +152,8 @@ std::string glb_bytes(const std::vector<GltfPart>& parts, const GltfOptions& opt
   tinygltf::Value::Object units;
   units["length_unit"] = tinygltf::Value(std::string("metre"));
   units["source_frame"] = tinygltf::Value(std::string("machine workpiece frame, Z up, mm"));
+  for (const auto& [k, v] : opt.extras_text) units[k] = tinygltf::Value(v);
+  for (const auto& [k, v] : opt.extras_number) units[k] = tinygltf::Value(v);
   model.asset.extras = tinygltf::Value(units);
 
   tinygltf::Scene scene;

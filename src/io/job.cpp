@@ -88,7 +88,28 @@ Job load_job(const std::string& path) {
   }
   Job job;
   job.source = path;
-  ctx.only_keys(root, {"program", "machine", "stock", "tool", "simulation"}, "the job");
+  ctx.only_keys(root, {"program", "machine", "stock", "tool", "simulation", "target"}, "the job");
+  if (auto* tt = root["target"].as_table()) {
+    ctx.only_keys(*tt, {"file", "offset", "rotate_deg", "scale", "tolerance_mm"}, "[target]");
+    const auto dir = std::filesystem::path(path).parent_path();
+    if (auto* f = tt->get("file")) {
+      const auto v = f->value<std::string>();
+      if (!v) ctx.fail(f->source(), "[target] file must be a string");
+      job.target = std::filesystem::path(*v).is_relative() ? (dir / *v).string() : *v;
+    }
+    if (auto* v = tt->get("offset")) job.target_offset_mm = ctx.vec3(*v, "[target] offset");
+    if (auto* v = tt->get("rotate_deg")) job.target_rotate_deg = ctx.vec3(*v, "[target] rotate_deg");
+    if (auto* v = tt->get("scale")) {
+      job.target_scale = ctx.number(*v, "[target] scale");
+      if (!(job.target_scale > 0)) ctx.fail(v->source(), "[target] scale must be positive");
+    }
+    if (auto* v = tt->get("tolerance_mm")) {
+      job.tolerance_mm = ctx.number(*v, "[target] tolerance_mm");
+      if (!(*job.tolerance_mm >= 0)) ctx.fail(v->source(), "[target] tolerance_mm must not be negative");
+    }
+  } else if (root.contains("target")) {
+    ctx.fail(root.get("target")->source(), "[target] must be a table");
+  }
   if (auto* mt = root["machine"].as_table()) {
     ctx.only_keys(*mt, {"name", "errors", "tool_setting", "workpiece_setting", "environment"}, "[machine]");
     const auto dir = std::filesystem::path(path).parent_path();

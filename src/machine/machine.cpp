@@ -122,7 +122,8 @@ Machine parse_machine(const std::string& path, const std::string& text) {
     const double unit = rot ? kPi / 180 : 1.0;  // degrees in the file, radians inside
     if (auto* v = t->get("direction")) {
       j.direction = ctx.vec3(*v, "direction");
-      if (j.direction.norm() < 1e-12) ctx.fail(v->source(), "direction must not be zero");
+      const double len = j.direction.norm();
+      if (!(len > 1e-12) || !std::isfinite(len)) ctx.fail(v->source(), "direction must be a finite, non-zero vector");
       j.direction.normalize();
     } else {
       ctx.fail(t->source(), "joint needs a direction");

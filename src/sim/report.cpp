@@ -48,6 +48,17 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
                   {"amplitude_mm", a.amplitude_mm}, {"limited_by", a.limited_by}});
   j["amplitude_limits"] = al;
   j["laser_scale"] = {{"applied", r.laser_error_applied}, {"max_error_um", r.max_laser_error_mm * 1000}};
+  if (r.comparison) {
+    const auto& c = *r.comparison;
+    j["overcut_volume_mm3"] = c.overcut_volume_mm3;
+    j["undercut_volume_mm3"] = c.undercut_volume_mm3;
+    j["overcut_volume_um3"] = c.overcut_volume_mm3 * 1e9;
+    j["undercut_volume_um3"] = c.undercut_volume_mm3 * 1e9;
+    j["max_overcut_mm"] = c.max_overcut_mm;
+    j["max_undercut_mm"] = c.max_undercut_mm;
+    j["tolerance_mm"] = c.tolerance_mm;
+    j["fraction_in_tolerance"] = c.fraction_in_tolerance;
+  }
   j["active_voxels"] = st.active_voxels;
   j["leaf_nodes"] = st.leaf_nodes;
   nlohmann::ordered_json w = nlohmann::ordered_json::array();
@@ -75,6 +86,15 @@ std::string report_text(const SimResult& r, const ReportOutputs& out) {
                 r.stock->initial_volume_mm3(), r.stock->volume_mm3(), r.stock->removed_volume_mm3());
   os << buf;
   for (const auto& x : r.warnings) os << r.program << ":" << x.line << ": warning: " << x.message << "\n";
+  if (r.comparison) {
+    const auto& c = *r.comparison;
+    std::snprintf(buf, sizeof buf,
+                  "target: overcut %.6g mm3 (%.4g um3), undercut %.6g mm3 (%.4g um3); max overcut %.3g um, max undercut "
+                  "%.3g um; %.1f %% of the surface within +-%.3g um\n",
+                  c.overcut_volume_mm3, c.overcut_volume_mm3 * 1e9, c.undercut_volume_mm3, c.undercut_volume_mm3 * 1e9,
+                  c.max_overcut_mm * 1e3, c.max_undercut_mm * 1e3, 100 * c.fraction_in_tolerance, c.tolerance_mm * 1e3);
+    os << buf;
+  }
   const std::size_t shown = std::min<std::size_t>(r.axis_limit_violations.size(), 20);
   for (std::size_t i = 0; i < shown; ++i) {
     const auto& a = r.axis_limit_violations[i];

@@ -9,6 +9,7 @@
 #include "cutsim/core/error.h"
 #include "cutsim/core/interrupt.h"
 #include "cutsim/gcode/program_reader.h"
+#include "cutsim/io/mesh_io.h"
 #include "cutsim/sim/planner.h"
 #include "cutsim/sweep/sweep.h"
 
@@ -134,6 +135,16 @@ void amplitude_limits_of(const machine::Machine& mach, const machine::AxisMonito
   }
 }
 }  // namespace
+
+TriMesh load_target(const std::string& file, double scale, const Vec3& rotate_deg, const Vec3& offset_mm) {
+  TriMesh m = io::load_mesh(file);
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(deg_to_rad(rotate_deg.z()), Vec3::UnitZ()) *
+                             Eigen::AngleAxisd(deg_to_rad(rotate_deg.y()), Vec3::UnitY()) *
+                             Eigen::AngleAxisd(deg_to_rad(rotate_deg.x()), Vec3::UnitX())).toRotationMatrix();
+  for (Vec3& p : m.positions) p = R * (scale * p) + offset_mm;
+  io::require_closed(m, file);
+  return m;
+}
 
 AxisReport analyze_axes(const std::string& program, const ProgramOptions& popt, const std::string& machine_name,
                         const motion::InterpreterOptions& iopt) {

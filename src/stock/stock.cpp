@@ -319,6 +319,38 @@ double Stock::surface_height(double x, double y, double z_from) const {
   return std::numeric_limits<double>::quiet_NaN();
 }
 
+void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn) const {
+  const Impl& m = *impl_;
+  const CoordBBox& r = m.roi_index;
+  std::vector<Coord> origins;
+  for (int x = r.min().x() & ~(kLeafDim - 1); x <= r.max().x(); x += kLeafDim)
+    for (int y = r.min().y() & ~(kLeafDim - 1); y <= r.max().y(); y += kLeafDim)
+      for (int z = r.min().z() & ~(kLeafDim - 1); z <= r.max().z(); z += kLeafDim) origins.emplace_back(x, y, z);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, origins.size()), [&](const auto& range) {
+    auto acc = m.grid->getConstAccessor();
+    VoxelBlock b;
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      CoordBBox part = CoordBBox::createCube(origins[i], kLeafDim);
+      part.intersect(r);
+      if (part.empty()) continue;
+      const Coord lo = part.min();
+      b.first_center = m.origin + m.h * Vec3(lo.x(), lo.y(), lo.z());
+      for (int k = 0; k < 3; ++k) b.n[k] = part.max()[k] - lo[k] + 1;
+      const LeafT* leaf = acc.probeConstLeaf(lo);
+      b.uniform = leaf == nullptr;
+      if (b.uniform) {
+        b.value = acc.getValue(lo);
+      } else {
+        for (int x = 0; x < b.n[0]; ++x)
+          for (int y = 0; y < b.n[1]; ++y)
+            for (int z = 0; z < b.n[2]; ++z)
+              b.values[(x * 8 + y) * 8 + z] = leaf->getValue(lo + Coord(x, y, z));
+      }
+      fn(b);
+    }
+  });
+}
+
 const Aabb& Stock::box() const { return impl_->box; }
 const Aabb& Stock::roi() const { return impl_->roi; }
 double Stock::voxel_mm() const { return impl_->h; }

@@ -4,6 +4,7 @@
 // local origin held by its node in double precision.
 #include <array>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "cutsim/core/mesh.h"
@@ -14,10 +15,15 @@ struct GltfPart {
   std::string name;
   const TriMesh* mesh = nullptr;
   std::array<float, 4> base_color{0.75f, 0.75f, 0.78f, 1.0f};  ///< linear RGBA
+  const std::vector<std::array<float, 4>>* colors = nullptr;   ///< COLOR_0 per vertex, linear RGBA
+  const std::vector<float>* deviation_mm = nullptr;              ///< _DEVIATION per vertex (custom attribute)
 };
 
 struct GltfOptions {
   std::string generator = "cutsim";
+  /// Added to the asset's extras (units, colour scale...).
+  std::vector<std::pair<std::string, std::string>> extras_text;
+  std::vector<std::pair<std::string, double>> extras_number;
 };
 
 /// Serialises the parts to .glb bytes. Parts with no triangles are skipped.

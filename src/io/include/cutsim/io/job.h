@@ -26,6 +26,11 @@ struct Job {
   std::optional<std::string> tool_setting;       ///< [machine] tool_setting = "dz=0.01"
   std::optional<std::string> workpiece_setting;  ///< [machine] workpiece_setting = "..."
   std::optional<std::string> environment;        ///< [machine] environment = "env.csv" (beside the job)
+  std::optional<std::string> target;             ///< [target] file (beside the job)
+  Vec3 target_offset_mm = Vec3::Zero();          ///< [target] offset: added after rotation and scale
+  Vec3 target_rotate_deg = Vec3::Zero();         ///< [target] rotate_deg: about X, then Y, then Z
+  double target_scale = 1.0;                     ///< [target] scale: file units to mm (0.001 for um)
+  std::optional<double> tolerance_mm;            ///< [target] tolerance_mm
 };
 
 /// Reads a job file.

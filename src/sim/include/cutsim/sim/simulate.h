@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "cutsim/compare/compare.h"
 #include "cutsim/core/geometry.h"
 #include "cutsim/core/mesh.h"
 #include "cutsim/gcode/block.h"
@@ -80,7 +81,13 @@ struct SimResult {
   bool interrupted = false;                     ///< stopped early (keep_partial)
   std::string interrupt_message;
   int interrupt_status = 0;                     ///< exit status the CLI returns
+  std::optional<compare::CompareResult> comparison;  ///< with a target
 };
+
+/// The target mesh from a file, placed in the workpiece frame (scale, then
+/// rotation about X, Y, Z, then offset) and checked to be closed.
+/// @throw InputError, ParseError, GeometryError (open edges and the like).
+TriMesh load_target(const std::string& file, double scale, const Vec3& rotate_deg, const Vec3& offset_mm);
 
 /// Applies `AXIS:key=value,...` to the machine's joint errors and
 /// `key=value,...` setting specs (keys dx dy dz in mm, alpha beta gamma in rad).

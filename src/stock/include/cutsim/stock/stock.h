@@ -3,6 +3,7 @@
 // narrow-band level set; outside the ROI the stock stays its analytic box.
 // OpenVDB stays out of this header (see grid_access.h for the grid itself).
 #include <cstddef>
+#include <functional>
 #include <memory>
 
 #include "cutsim/core/geometry.h"
@@ -17,6 +18,16 @@ struct StockOptions {
   /// Refuse to build a grid whose estimated memory exceeds this, bytes;
   /// 0 = 75 % of physical memory.
   std::size_t memory_limit_bytes = 0;
+};
+
+/// Up to 8 x 8 x 8 voxels of the region of interest (a leaf-sized block,
+/// clipped to the ROI).
+struct VoxelBlock {
+  Vec3 first_center;   ///< world position of voxel (0, 0, 0) of the block
+  int n[3] = {0, 0, 0};///< voxels along x, y, z
+  bool uniform = false;///< every voxel holds `value` (a tile: all material or all air)
+  float value = 0;
+  float values[512];   ///< level-set values, index (x * 8 + y) * 8 + z, when not uniform
 };
 
 struct StockStats {
@@ -55,6 +66,9 @@ public:
   /// crossing of the level set below `z_from`, by linear interpolation.
   /// Returns NaN when no crossing is found inside the ROI.
   double surface_height(double x, double y, double z_from) const;
+  /// Calls `fn` for every block of the region of interest, in parallel;
+  /// `fn` must be safe to call from several threads at once.
+  void for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn) const;
   /// Level-set value at a world point (trilinear), mm.
   double sample(const Vec3& p) const;
 

@@ -1,0 +1,7 @@
+// libFuzzer target: the environment loader.
+#include "fuzz_inputs.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  cutsim::fuzz::environment_input(data, size);
+  return 0;
+}

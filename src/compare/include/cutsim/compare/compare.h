@@ -1,0 +1,35 @@
+#pragma once
+// Machined stock against the target: signed deviation of the machined
+// surface (exact to the target's triangles) and overcut / undercut volumes.
+#include <vector>
+
+#include "cutsim/compare/target.h"
+#include "cutsim/core/mesh.h"
+#include "cutsim/stock/stock.h"
+
+namespace cutsim::compare {
+
+struct CompareOptions {
+  double tolerance_mm = 0.001;  ///< deviations within +-tolerance count as in tolerance
+};
+
+struct CompareResult {
+  /// Material removed that the target keeps / left that the target removes,
+  /// mm^3, integrated over the region of interest by voxel coverage:
+  /// per voxel max(0, f_target - f_stock) and max(0, f_stock - f_target),
+  /// f = clamp(1/2 - d/h, 0, 1).
+  double overcut_volume_mm3 = 0;
+  double undercut_volume_mm3 = 0;
+  double max_overcut_mm = 0;     ///< deepest machined-surface point inside the target
+  double max_undercut_mm = 0;    ///< farthest machined-surface point outside it
+  double tolerance_mm = 0;
+  double fraction_in_tolerance = 0;  ///< of the machined surface's area
+  /// Signed deviation at each vertex of the machined mesh: + outside the
+  /// target (undercut), - inside (overcut).
+  std::vector<float> vertex_deviation_mm;
+};
+
+CompareResult compare(const stock::Stock& stock, const Target& target, const TriMesh& machined,
+                      const CompareOptions& opt = {});
+
+}  // namespace cutsim::compare

@@ -1,0 +1,37 @@
+#pragma once
+// The design (target) as a closed triangle mesh with exact signed
+// distances: Embree finds the closest triangle, the sign comes from the
+// angle-weighted pseudonormal of the closest feature (Baerentzen-Aanaes),
+// which is exact for closed, consistently oriented meshes.
+#include <memory>
+
+#include "cutsim/core/mesh.h"
+
+namespace cutsim::compare {
+
+class Target {
+public:
+  /// @pre `mesh` is closed and consistently oriented (io::require_closed).
+  explicit Target(TriMesh mesh);
+  ~Target();
+  Target(Target&&) noexcept;
+
+  /// Signed distance to the surface, mm: negative inside (material).
+  double signed_distance(const Vec3& p) const;
+  /// Like signed_distance; exact within `radius`, and beyond it the
+  /// unbounded query (faster when most points are near the surface).
+  double signed_distance_within(const Vec3& p, double radius) const;
+  /// Inside by ray parity (a cross-check for tests; not robust on edges).
+  bool inside(const Vec3& p) const;
+  /// For diagnosis: the closest triangle, its feature and point.
+  void debug_closest(const Vec3& p, unsigned* prim, int* feature, Vec3* closest) const;
+  const TriMesh& mesh() const;
+  const Aabb& bounds() const;
+  double volume_mm3() const;
+
+private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace cutsim::compare

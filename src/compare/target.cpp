@@ -1,0 +1,230 @@
+#include "cutsim/compare/target.h"
+
+#include <cmath>
+#include <limits>
+#include <unordered_map>
+
+#include <embree3/rtcore.h>
+
+#include "cutsim/core/error.h"
+
+namespace cutsim::compare {
+
+namespace {
+
+// Closest point on triangle (a, b, c) to p (Ericson, Real-Time Collision
+// Detection 5.1.5); `feature` is 0 face, 1-3 vertex a/b/c, 4-6 edge ab/bc/ca.
+Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, int& feature) {
+  const Vec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) { feature = 1; return a; }
+  const Vec3 bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) { feature = 2; return b; }
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) { feature = 4; return a + (d1 / (d1 - d3)) * ab; }
+  const Vec3 cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) { feature = 3; return c; }
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) { feature = 6; return a + (d2 / (d2 - d6)) * ac; }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) { feature = 5; return b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b); }
+  const double denom = 1 / (va + vb + vc);
+  feature = 0;
+  return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+}  // namespace
+
+struct Target::Impl {
+  TriMesh mesh;
+  Aabb box;
+  Vec3 origin;  // Embree works in floats: coordinates relative to this
+  std::vector<Vec3> face_n;      // unit face normals
+  std::vector<Vec3> vertex_n;    // angle-weighted pseudonormals
+  std::unordered_map<std::uint64_t, Vec3> edge_n;  // sum of the two face normals
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  double volume = 0;
+
+  static std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
+    return (static_cast<std::uint64_t>(std::min(a, b)) << 32) | std::max(a, b);
+  }
+
+  struct Query {
+    const Impl* self;
+    Vec3 p;
+    double best2 = std::numeric_limits<double>::infinity();
+    Vec3 closest;
+    unsigned prim = 0;
+    int feature = 0;
+  };
+
+  static bool callback(RTCPointQueryFunctionArguments* args) {
+    Query& q = *static_cast<Query*>(args->userPtr);
+    const auto& t = q.self->mesh.triangles[args->primID];
+    int f;
+    const Vec3 c = closest_on_triangle(q.p, q.self->mesh.positions[t[0]], q.self->mesh.positions[t[1]],
+                                       q.self->mesh.positions[t[2]], f);
+    const double d2 = (c - q.p).squaredNorm();
+    if (d2 < q.best2) {
+      q.best2 = d2;
+      q.closest = c;
+      q.prim = args->primID;
+      q.feature = f;
+      args->query->radius = static_cast<float>(std::sqrt(d2) * (1 + 1e-6) + 1e-9);
+      return true;
+    }
+    return false;
+  }
+
+  // Closest point within `radius`; false when there is none.
+  // Only triangles within `radius` count: a farther one Embree happens to
+  // offer (its box touches the sphere) is not the closest beyond the radius,
+  // and its distance and sign would be wrong.
+  bool closest(const Vec3& p, double radius, Query& q) const {
+    q.self = this;
+    q.p = p;
+    q.best2 = std::isfinite(radius) ? radius * radius : std::numeric_limits<double>::infinity();
+    RTCPointQuery pq;
+    const Vec3 l = p - origin;
+    pq.x = static_cast<float>(l.x());
+    pq.y = static_cast<float>(l.y());
+    pq.z = static_cast<float>(l.z());
+    pq.time = 0;
+    pq.radius = std::isfinite(radius) ? static_cast<float>(radius * (1 + 1e-5) + 1e-6) : std::numeric_limits<float>::infinity();
+    RTCPointQueryContext ctx;
+    rtcInitPointQueryContext(&ctx);
+    const double limit = q.best2;
+    rtcPointQuery(scene, &pq, &ctx, &Impl::callback, &q);
+    return q.best2 < limit || (!std::isfinite(limit) && std::isfinite(q.best2));
+  }
+
+  double sign_at(const Query& q) const {
+    const auto& t = mesh.triangles[q.prim];
+    Vec3 n;
+    switch (q.feature) {
+      case 0: n = face_n[q.prim]; break;
+      case 1: n = vertex_n[t[0]]; break;
+      case 2: n = vertex_n[t[1]]; break;
+      case 3: n = vertex_n[t[2]]; break;
+      case 4: n = edge_n.at(edge_key(t[0], t[1])); break;
+      case 5: n = edge_n.at(edge_key(t[1], t[2])); break;
+      default: n = edge_n.at(edge_key(t[2], t[0])); break;
+    }
+    return (q.p - q.closest).dot(n) >= 0 ? 1.0 : -1.0;
+  }
+
+  // Inside by ray parity along a direction no axis-aligned model lines up with.
+  bool inside_by_ray(const Vec3& p) const {
+    const Vec3 dir = Vec3(0.5773, 0.5774, 0.5775).normalized();
+    int hits = 0;
+    float tnear = 0;
+    const Vec3 l = p - origin;
+    for (int guard = 0; guard < 100000; ++guard) {
+      RTCRayHit rh{};
+      rh.ray.org_x = static_cast<float>(l.x());
+      rh.ray.org_y = static_cast<float>(l.y());
+      rh.ray.org_z = static_cast<float>(l.z());
+      rh.ray.dir_x = static_cast<float>(dir.x());
+      rh.ray.dir_y = static_cast<float>(dir.y());
+      rh.ray.dir_z = static_cast<float>(dir.z());
+      rh.ray.tnear = tnear;
+      rh.ray.tfar = std::numeric_limits<float>::infinity();
+      rh.ray.mask = 0xFFFFFFFF;
+      rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+      RTCIntersectContext ic;
+      rtcInitIntersectContext(&ic);
+      rtcIntersect1(scene, &ic, &rh);
+      if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) break;
+      ++hits;
+      tnear = std::nextafter(rh.ray.tfar, std::numeric_limits<float>::infinity());
+    }
+    return hits % 2 == 1;
+  }
+};
+
+Target::Target(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.mesh = std::move(mesh);
+  m.box = m.mesh.bounds();
+  m.origin = m.box.center();
+  m.volume = m.mesh.signed_volume();
+  const std::size_t nf = m.mesh.triangles.size(), nv = m.mesh.positions.size();
+  m.face_n.resize(nf);
+  m.vertex_n.assign(nv, Vec3::Zero());
+  for (std::size_t f = 0; f < nf; ++f) {
+    const auto& t = m.mesh.triangles[f];
+    const Vec3 &a = m.mesh.positions[t[0]], &b = m.mesh.positions[t[1]], &c = m.mesh.positions[t[2]];
+    Vec3 n = (b - a).cross(c - a);
+    const double len = n.norm();
+    m.face_n[f] = len > 0 ? Vec3(n / len) : Vec3::Zero();
+    const Vec3* v[3] = {&a, &b, &c};
+    for (int k = 0; k < 3; ++k) {
+      const Vec3 e1 = (*v[(k + 1) % 3] - *v[k]).normalized(), e2 = (*v[(k + 2) % 3] - *v[k]).normalized();
+      const double ang = std::acos(std::clamp(e1.dot(e2), -1.0, 1.0));
+      m.vertex_n[t[static_cast<std::size_t>(k)]] += ang * m.face_n[f];
+      // try_emplace with an explicit zero: Eigen's default constructor leaves
+      // the coefficients uninitialised, so operator[] would add to garbage.
+      const auto key = Impl::edge_key(t[static_cast<std::size_t>(k)], t[static_cast<std::size_t>((k + 1) % 3)]);
+      m.edge_n.try_emplace(key, Vec3::Zero()).first->second += m.face_n[f];
+    }
+  }
+  m.device = rtcNewDevice(nullptr);
+  if (!m.device) throw GeometryError({}, "Embree: cannot create a device");
+  m.scene = rtcNewScene(m.device);
+  RTCGeometry g = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), nv));
+  for (std::size_t i = 0; i < nv; ++i) {
+    const Vec3 l = m.mesh.positions[i] - m.origin;
+    vb[3 * i] = static_cast<float>(l.x());
+    vb[3 * i + 1] = static_cast<float>(l.y());
+    vb[3 * i + 2] = static_cast<float>(l.z());
+  }
+  auto* ib = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), nf));
+  for (std::size_t f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) ib[3 * f + static_cast<std::size_t>(k)] = m.mesh.triangles[f][static_cast<std::size_t>(k)];
+  rtcCommitGeometry(g);
+  rtcAttachGeometry(m.scene, g);
+  rtcReleaseGeometry(g);
+  rtcSetSceneFlags(m.scene, RTC_SCENE_FLAG_ROBUST);
+  rtcCommitScene(m.scene);
+  if (rtcGetDeviceError(m.device) != RTC_ERROR_NONE) throw GeometryError({}, "Embree: cannot build the target scene");
+}
+
+Target::~Target() {
+  if (!impl_) return;
+  if (impl_->scene) rtcReleaseScene(impl_->scene);
+  if (impl_->device) rtcReleaseDevice(impl_->device);
+}
+Target::Target(Target&&) noexcept = default;
+
+double Target::signed_distance(const Vec3& p) const {
+  Impl::Query q;
+  impl_->closest(p, std::numeric_limits<double>::infinity(), q);
+  return impl_->sign_at(q) * std::sqrt(q.best2);
+}
+
+double Target::signed_distance_within(const Vec3& p, double radius) const {
+  Impl::Query q;
+  if (impl_->closest(p, radius, q)) return impl_->sign_at(q) * std::sqrt(q.best2);
+  // Beyond the radius: the unbounded query, not ray parity (a ray through a
+  // shared edge can count it twice, depending on the BVH).
+  return signed_distance(p);
+}
+
+bool Target::inside(const Vec3& p) const { return impl_->inside_by_ray(p); }
+
+void Target::debug_closest(const Vec3& p, unsigned* prim, int* feature, Vec3* closest) const {
+  Impl::Query q;
+  impl_->closest(p, std::numeric_limits<double>::infinity(), q);
+  *prim = q.prim;
+  *feature = q.feature;
+  *closest = q.closest;
+}
+const TriMesh& Target::mesh() const { return impl_->mesh; }
+const Aabb& Target::bounds() const { return impl_->box; }
+double Target::volume_mm3() const { return impl_->volume; }
+
+}  // namespace cutsim::compare

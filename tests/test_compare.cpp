@@ -1,0 +1,168 @@
+// Comparison with the target: overcut and undercut against closed forms,
+// their positions, a mesh with a hole refused, the coloured glb read back.
+#include <cmath>
+
+#include <nlohmann/json.hpp>
+#include <tiny_gltf.h>
+
+#include "cutsim/core/error.h"
+#include "cutsim/io/mesh_io.h"
+#include "helpers.h"
+
+namespace cutsim::test {
+namespace {
+
+// A 6 x 4 x 1 mm block (x 0..6, y -2..2, z -1..0) with a slot 2 mm wide and
+// 0.1 mm deep along X: the U profile in (y, z) extruded along x.
+TriMesh slotted_block() {
+  const std::vector<std::array<double, 2>> prof = {{-2, -1}, {2, -1}, {2, 0}, {1, 0}, {1, -0.1}, {-1, -0.1}, {-1, 0}, {-2, 0}};
+  const std::vector<std::array<std::uint32_t, 3>> cap = {{0, 1, 4}, {0, 4, 5}, {1, 2, 3}, {1, 3, 4}, {0, 5, 6}, {0, 6, 7}};
+  TriMesh m;
+  const auto n = static_cast<std::uint32_t>(prof.size());
+  for (double x : {0.0, 6.0})
+    for (const auto& p : prof) m.positions.emplace_back(x, p[0], p[1]);
+  for (const auto& t : cap) {
+    m.triangles.push_back({t[0], t[2], t[1]});              // x = 0, facing -x
+    m.triangles.push_back({n + t[0], n + t[1], n + t[2]});  // x = 6, facing +x
+  }
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const std::uint32_t j = (i + 1) % n;
+    m.triangles.push_back({i, j, n + j});
+    m.triangles.push_back({i, n + j, n + i});
+  }
+  if (m.signed_volume() < 0)
+    for (auto& t : m.triangles) std::swap(t[1], t[2]);
+  return m;
+}
+
+std::string write_stl(const TempDir& dir, const TriMesh& m, const std::string& name) {
+  std::string s = "solid t\n";
+  for (const auto& t : m.triangles) {
+    s += "facet normal 0 0 0\nouter loop\n";
+    for (int k = 0; k < 3; ++k) {
+      const Vec3& p = m.positions[t[static_cast<std::size_t>(k)]];
+      s += "vertex " + std::to_string(p.x()) + " " + std::to_string(p.y()) + " " + std::to_string(p.z()) + "\n";
+    }
+    s += "endloop\nendfacet\n";
+  }
+  return dir.write(name, s + "endsolid t\n");
+}
+
+struct SlotRun {
+  nlohmann::json report;
+  std::string glb;
+};
+
+// The slot cut with a 2 mm flat end mill, `first_depth` deep up to X3 and
+// 0.1 mm deep from there on.
+SlotRun cut_slot(const TempDir& dir, double first_depth) {
+  const auto target = write_stl(dir, slotted_block(), "target.stl");
+  const std::string prog = "G0 X-2 Y0 Z1\nG1 Z" + std::to_string(-first_depth) +
+                           " F100\nG1 X3\nG1 Z-0.1\nG1 X8\nG0 Z1\n";
+  const auto p = dir.write("slot.nc", prog);
+  std::string out, err;
+  const int code = run_cli("run " + p + " --tool flat:d=2 --stock-box 0,-2,-1,6,2,0 --voxel 0.005 --target " + target +
+                               " --tolerance 0.001 --format json -o " + dir.file("out"),
+                           &out, &err);
+  EXPECT_EQ(code, 0) << err;
+  SlotRun r;
+  r.report = nlohmann::json::parse(out);
+  r.glb = dir.file("out/slot.glb");
+  return r;
+}
+
+// Accuracy: the deviation region is a 5 um slab between planar faces on
+// voxel planes; we allow 0.05 h per mm^2 of its top and bottom faces.
+constexpr double kH = 0.005;
+constexpr double kFootprint = 2 * 3 + kPi / 2;  // deep stretch in the block: 2 x 3 mm plus the half disk
+
+TEST(Compare, SlotCutTooDeepOverHalfItsLengthIsOvercutOfTheClosedForm) {
+  TempDir dir;
+  const SlotRun r = cut_slot(dir, 0.105);
+  const double exact = 0.005 * kFootprint;
+  EXPECT_NEAR(r.report["overcut_volume_mm3"].get<double>(), exact, 0.05 * kH * 2 * kFootprint);
+  EXPECT_LT(r.report["undercut_volume_mm3"].get<double>(), 0.05 * kH * 2 * kFootprint);
+  EXPECT_NEAR(r.report["max_overcut_mm"].get<double>(), 0.005, kH / 4);
+  EXPECT_NEAR(r.report["overcut_volume_um3"].get<double>(), r.report["overcut_volume_mm3"].get<double>() * 1e9, 1e-3);
+
+  // Where: the overcut vertices are on the deep stretch (x < 4), none beyond.
+  tinygltf::Model model;
+  tinygltf::TinyGLTF loader;
+  std::string err, warn;
+  ASSERT_TRUE(loader.LoadBinaryFromFile(&model, &err, &warn, r.glb)) << err;
+  const auto& node = model.nodes[model.nodes[0].children[0]];
+  const auto& prim = model.meshes[node.mesh].primitives[0];
+  auto floats = [&](const std::string& attr) {
+    const auto& acc = model.accessors[prim.attributes.at(attr)];
+    const auto& view = model.bufferViews[acc.bufferView];
+    return reinterpret_cast<const float*>(model.buffers[view.buffer].data.data() + view.byteOffset + acc.byteOffset);
+  };
+  const std::size_t n = model.accessors[prim.attributes.at("POSITION")].count;
+  const float* pos = floats("POSITION");
+  const float* dev = floats("_DEVIATION");
+  const float* col = floats("COLOR_0");
+  int over = 0;
+  double most = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    most = std::min(most, static_cast<double>(dev[i]));
+    if (dev[i] < -0.004) {  // beyond the ~0.66 h rounding of sharp block edges
+      ++over;
+      const double x_mm = (node.translation[0] + pos[3 * i]) * 1000;
+      EXPECT_LT(x_mm, 4.01) << "overcut at x = " << x_mm;
+      EXPECT_GT(col[4 * i], 2 * col[4 * i + 1]) << "overcut vertices are red";
+      EXPECT_GT(col[4 * i], 2 * col[4 * i + 2]);
+    }
+  }
+  EXPECT_GT(over, 100);
+  EXPECT_NEAR(-most, r.report["max_overcut_mm"].get<double>(), 1e-6) << "the attribute matches the report";
+}
+
+TEST(Compare, SlotCutTooShallowOverHalfItsLengthIsUndercutOfTheClosedForm) {
+  TempDir dir;
+  const SlotRun r = cut_slot(dir, 0.095);
+  // The full-depth pass starts at X3 and clears the half disk behind it.
+  const double exact = 0.005 * (2 * 3 - kPi / 2);
+  EXPECT_NEAR(r.report["undercut_volume_mm3"].get<double>(), exact, 0.05 * kH * 2 * kFootprint);
+  EXPECT_LT(r.report["overcut_volume_mm3"].get<double>(), 0.05 * kH * 2 * kFootprint);
+  EXPECT_NEAR(r.report["max_undercut_mm"].get<double>(), 0.005, kH / 4);
+}
+
+TEST(Compare, TargetWithAHoleIsRefusedBeforeSimulating) {
+  TempDir dir;
+  TriMesh m = slotted_block();
+  m.triangles.pop_back();
+  const auto target = write_stl(dir, m, "holed.stl");
+  const auto p = dir.write("p.nc", "G0 X0 Y0 Z1\nG1 Z-0.1 F100\n");
+  std::string err;
+  EXPECT_EQ(run_cli("run " + p + " --stock-box 0,-2,-1,6,2,0 --target " + target + " -o " + dir.file("out"), nullptr, &err),
+            65);
+  EXPECT_NE(err.find("holed.stl: error: the target mesh is not a closed"), std::string::npos) << err;
+  EXPECT_NE(err.find("3 open edges"), std::string::npos) << err;
+  EXPECT_TRUE(!std::filesystem::exists(dir.file("out")) || std::filesystem::is_empty(dir.file("out")));
+}
+
+TEST(Compare, MeshFormatsLoadTheSameSolid) {
+  TempDir dir;
+  const TriMesh m = slotted_block();
+  const double v = m.signed_volume();
+  EXPECT_NEAR(v, 6 * (4 * 1 - 2 * 0.1), 1e-12);
+  EXPECT_NEAR(io::load_mesh(write_stl(dir, m, "a.stl")).signed_volume(), v, 1e-9);
+  std::string obj, ply = "ply\nformat ascii 1.0\nelement vertex " + std::to_string(m.positions.size()) +
+                         "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
+                         std::to_string(m.triangles.size()) + "\nproperty list uchar int vertex_indices\nend_header\n";
+  for (const auto& p : m.positions) {
+    obj += "v " + std::to_string(p.x()) + " " + std::to_string(p.y()) + " " + std::to_string(p.z()) + "\n";
+    ply += std::to_string(p.x()) + " " + std::to_string(p.y()) + " " + std::to_string(p.z()) + "\n";
+  }
+  for (const auto& t : m.triangles) {
+    obj += "f " + std::to_string(t[0] + 1) + " " + std::to_string(t[1] + 1) + " " + std::to_string(t[2] + 1) + "\n";
+    ply += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + "\n";
+  }
+  EXPECT_NEAR(io::load_mesh(dir.write("a.obj", obj)).signed_volume(), v, 1e-9);
+  EXPECT_NEAR(io::load_mesh(dir.write("a.ply", ply)).signed_volume(), v, 1e-9);
+  EXPECT_TRUE(io::find_defects(io::load_mesh(dir.file("a.obj"))).closed());
+  EXPECT_THROW(io::load_mesh(dir.write("a.xyz", "1 2 3\n")), ParseError);
+}
+
+}  // namespace
+}  // namespace cutsim::test
