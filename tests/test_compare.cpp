@@ -115,6 +115,44 @@ TEST(Compare, SlotCutTooDeepOverHalfItsLengthIsOvercutOfTheClosedForm) {
   }
   EXPECT_GT(over, 100);
   EXPECT_NEAR(-most, r.report["max_overcut_mm"].get<double>(), 1e-6) << "the attribute matches the report";
+
+  // The overcut region is its own node: a thin slab under the deep stretch.
+  const tinygltf::Node* oc = nullptr;
+  for (int c : model.nodes[0].children)
+    if (model.nodes[c].name == "overcut") oc = &model.nodes[c];
+  ASSERT_NE(oc, nullptr);
+  const auto& oprim = model.meshes[oc->mesh].primitives[0];
+  const auto& oacc = model.accessors[oprim.attributes.at("POSITION")];
+  const auto& oview = model.bufferViews[oacc.bufferView];
+  const float* op = reinterpret_cast<const float*>(model.buffers[oview.buffer].data.data() + oview.byteOffset + oacc.byteOffset);
+  const auto& iacc = model.accessors[oprim.indices];
+  const auto& iview = model.bufferViews[iacc.bufferView];
+  const auto* idx = reinterpret_cast<const std::uint32_t*>(model.buffers[iview.buffer].data.data() + iview.byteOffset + iacc.byteOffset);
+  auto vertex = [&](std::uint32_t i) -> Vec3 {
+    return Vec3(oc->translation[0] + op[3 * i], oc->translation[1] + op[3 * i + 1], oc->translation[2] + op[3 * i + 2]) * 1000;
+  };
+  // A thin slab: its area is about twice its footprint, its area-weighted
+  // centre under the deep stretch (x 0..4, y 0, z between the floors).
+  double area = 0;
+  Vec3 centre = Vec3::Zero();
+  for (std::size_t t = 0; t + 2 < iacc.count; t += 3) {
+    const Vec3 a = vertex(idx[t]), b = vertex(idx[t + 1]), c = vertex(idx[t + 2]);
+    const double ar = 0.5 * (b - a).cross(c - a).norm();
+    area += ar;
+    centre += ar * (a + b + c) / 3;
+  }
+  centre /= area;
+  EXPECT_NEAR(area, 2 * kFootprint, 0.2 * 2 * kFootprint);
+  EXPECT_NEAR(centre.x(), (2 * 3 * 1.5 + kPi / 2 * (3 + 4 / (3 * kPi))) / kFootprint, 0.1);
+  EXPECT_NEAR(centre.y(), 0, 0.05);
+  EXPECT_NEAR(centre.z(), -0.1025, 2 * kH);
+
+  // Khronos' validator on the coloured file.
+  const std::string cmd = "cd " + std::string(CUTSIM_GLTF_VALIDATOR_DIR) + " && node " + CUTSIM_SOURCE_DIR +
+                          "/tests/tools/validate_gltf.mjs " + r.glb;
+  std::string vout;
+  EXPECT_EQ(run_cli_raw(cmd, &vout), 0) << vout;
+  EXPECT_NE(vout.find(": 0 errors"), std::string::npos) << vout;
 }
 
 TEST(Compare, SlotCutTooShallowOverHalfItsLengthIsUndercutOfTheClosedForm) {

@@ -39,6 +39,7 @@ struct RunArgs {
   bool partial = false;
   std::string target;
   double tolerance = -1;
+  double glb_scale = 1.0;
 };
 
 // Deviation colours, linear RGB: overcut red, undercut blue, within the
@@ -88,6 +89,9 @@ Action add_run_command(CLI::App& app) {
   cmd->add_option("--target", args->target, "target (design) mesh: STL, OBJ, PLY, glTF or glb, in the workpiece frame");
   cmd->add_option("--tolerance", args->tolerance, "deviation band counted as in tolerance, mm (default 0.001)")
       ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--glb-scale", args->glb_scale,
+                  "scale of the glb's root node (1: metres; 1000 shows a 1 mm part as 1 m)")
+      ->check(CLI::PositiveNumber);
   cmd->add_option("--mesh-adaptivity", args->mesh_adaptivity,
                   "0: one quad per surface voxel; 0.01 (default) to 1: merge ever less flat regions into larger polygons")
       ->check(CLI::Range(0.0, 1.0));
@@ -139,6 +143,7 @@ Action add_run_command(CLI::App& app) {
     const TriMesh mesh = res.stock->surface_mesh(args->mesh_adaptivity);
     io::GltfPart part{"machined_stock", &mesh, {0.75f, 0.75f, 0.78f, 1.0f}};
     io::GltfOptions gopt;
+    gopt.scale = args->glb_scale;
     std::vector<std::array<float, 4>> colors;
     if (target_mesh) {
       const compare::Target target(std::move(*target_mesh));
@@ -152,7 +157,12 @@ Action add_run_command(CLI::App& app) {
       gopt.extras_number = {{"tolerance_mm", tolerance}, {"max_overcut_mm", c.max_overcut_mm},
                             {"max_undercut_mm", c.max_undercut_mm}};
     }
-    io::write_glb(out.glb, {part}, gopt);
+    std::vector<io::GltfPart> parts{part};
+    if (res.comparison) {
+      parts.push_back(io::GltfPart{"overcut", &res.comparison->overcut_mesh, {0.85f, 0.05f, 0.05f, 1.0f}});
+      parts.push_back(io::GltfPart{"undercut", &res.comparison->undercut_mesh, {0.05f, 0.1f, 0.85f, 1.0f}});
+    }
+    io::write_glb(out.glb, parts, gopt);
     res.timing.export_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_exp).count();
     res.timing.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const std::string json = sim::report_json(res, out);

@@ -43,6 +43,7 @@ std::string glb_bytes(const std::vector<GltfPart>& parts, const GltfOptions& opt
   tinygltf::Node root;
   root.name = "cutsim_root (Z-up mm machine frame to Y-up metres)";
   root.rotation = {-std::sqrt(0.5), 0.0, 0.0, std::sqrt(0.5)};  // -90 deg about X
+  if (opt.scale != 1.0) root.scale = {opt.scale, opt.scale, opt.scale};
   model.nodes.push_back(root);
 
   for (const GltfPart& part : parts) {
@@ -152,6 +153,7 @@ std::string glb_bytes(const std::vector<GltfPart>& parts, const GltfOptions& opt
   tinygltf::Value::Object units;
   units["length_unit"] = tinygltf::Value(std::string("metre"));
   units["source_frame"] = tinygltf::Value(std::string("machine workpiece frame, Z up, mm"));
+  units["display_scale"] = tinygltf::Value(opt.scale);
   for (const auto& [k, v] : opt.extras_text) units[k] = tinygltf::Value(v);
   for (const auto& [k, v] : opt.extras_number) units[k] = tinygltf::Value(v);
   model.asset.extras = tinygltf::Value(units);

@@ -168,6 +168,7 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
   leaves.reserve(leaf_origins.size());
   for (const Coord& o : leaf_origins) leaves.push_back(tree.touchLeaf(o));
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
+    if (interrupted()) return;  // abandoned: the caller throws below
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       LeafT* leaf = leaves[i];
       for (auto it = leaf->beginValueAll(); it; ++it) {
@@ -182,6 +183,7 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
       }
     }
   });
+  if (interrupted()) throw InterruptedError({}, interrupt_signal().load(), "interrupted while building the stock grid");
   m.initial_grid_volume = m.grid_volume();
 }
 

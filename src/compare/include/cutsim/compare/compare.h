@@ -27,6 +27,9 @@ struct CompareResult {
   /// Signed deviation at each vertex of the machined mesh: + outside the
   /// target (undercut), - inside (overcut).
   std::vector<float> vertex_deviation_mm;
+  /// The overcut and undercut regions as closed meshes (zero sets of
+  /// max(d_target, -d_stock) and max(d_stock, -d_target) on the voxels).
+  TriMesh overcut_mesh, undercut_mesh;
 };
 
 CompareResult compare(const stock::Stock& stock, const Target& target, const TriMesh& machined,

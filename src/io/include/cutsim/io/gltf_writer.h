@@ -21,6 +21,9 @@ struct GltfPart {
 
 struct GltfOptions {
   std::string generator = "cutsim";
+  /// Scale of the root node: 1 keeps metres; 1000 shows a 1 mm part as 1 m
+  /// for viewers with a fixed near plane.
+  double scale = 1.0;
   /// Added to the asset's extras (units, colour scale...).
   std::vector<std::pair<std::string, std::string>> extras_text;
   std::vector<std::pair<std::string, double>> extras_number;
