@@ -12,6 +12,7 @@
 #include "cutsim/core/error.h"
 #include "cutsim/gcode/program_reader.h"
 #include "cutsim/io/job.h"
+#include "cutsim/io/mesh_io.h"
 #include "cutsim/machine/environment.h"
 #include "cutsim/machine/kinematics.h"
 #include "cutsim/motion/interpreter.h"
@@ -85,6 +86,20 @@ inline void machine_input(const std::uint8_t* data, std::size_t size) {
     for (double v : {0.0, 1.0, -2.5})
       (void)k.tool_pose({v, v, v, v, v, v});
     (void)k.solve_tip(Vec3(1, 2, 3), {0, 0, 0, 0.1, 0.2, 0.3});
+  } catch (const Error&) {
+  }
+  std::remove(path.c_str());
+}
+
+/// First byte: the format (stl, obj, ply, glb); the rest is the file. A
+/// loaded mesh is also checked for closedness.
+inline void mesh_input(const std::uint8_t* data, std::size_t size) {
+  if (size == 0) return;
+  static const char* kExt[] = {"stl", "obj", "ply", "glb"};
+  const std::string path = detail::write_temp((std::string("mesh.") + kExt[data[0] % 4]).c_str(), data + 1, size - 1);
+  try {
+    const TriMesh m = io::load_mesh(path);
+    (void)io::find_defects(m);
   } catch (const Error&) {
   }
   std::remove(path.c_str());

@@ -13,8 +13,8 @@ if ! command -v clang++ >/dev/null || [ ! -e /usr/lib/llvm-14/lib/clang/14.0.6/l
 fi
 cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ \
   -DCUTSIM_FUZZ=ON -DCUTSIM_BUILD_TESTS=OFF -DCUTSIM_BUILD_BENCH=OFF >/dev/null
-cmake --build build-fuzz --target fuzz_gcode fuzz_job fuzz_machine fuzz_environment
-mkdir -p build-fuzz/artifacts build-fuzz/corpus/gcode build-fuzz/corpus/job build-fuzz/corpus/machine build-fuzz/corpus/environment
+cmake --build build-fuzz --target fuzz_gcode fuzz_job fuzz_machine fuzz_environment fuzz_mesh
+mkdir -p build-fuzz/artifacts build-fuzz/corpus/gcode build-fuzz/corpus/job build-fuzz/corpus/machine build-fuzz/corpus/environment build-fuzz/corpus/mesh
 # Seeds for the G-code target carry a first byte choosing dialect and block delete.
 for f in tests/conformance/*.nc ncprograms/*.nc; do
   d=0; grep -q fanuc "${f%.nc}.expected" 2>/dev/null && d=1
@@ -22,9 +22,12 @@ for f in tests/conformance/*.nc ncprograms/*.nc; do
 done
 cp ncprograms/*.toml build-fuzz/corpus/job/ 2>/dev/null || true
 cp models/machines/*.toml build-fuzz/corpus/machine/
+printf '\x00solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n' > build-fuzz/corpus/mesh/seed.stl
+printf '\x01v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 3 1 4\n' > build-fuzz/corpus/mesh/seed.obj
+printf '\x02ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n' > build-fuzz/corpus/mesh/seed.ply
 printf 'time_s,temperature_c,humidity_pct,pressure_hpa\n0,20,50,1013.25\n60,20.1,49,1013.6\n' > build-fuzz/corpus/environment/seed.csv
 status=0
-for t in gcode job machine environment; do
+for t in gcode job machine environment mesh; do
   echo "fuzz_$t: ${SECONDS_EACH}s"
   ./build-fuzz/fuzz/fuzz_$t -max_total_time="$SECONDS_EACH" -timeout=10 -rss_limit_mb=2048 -max_len=4096 -use_value_profile=1 \
     -artifact_prefix=build-fuzz/artifacts/$t- -print_final_stats=1 \

@@ -179,6 +179,19 @@ TEST(Compare, TargetWithAHoleIsRefusedBeforeSimulating) {
   EXPECT_TRUE(!std::filesystem::exists(dir.file("out")) || std::filesystem::is_empty(dir.file("out")));
 }
 
+TEST(Compare, TargetThatMissesTheStockIsRefusedBeforeSimulating) {
+  TempDir dir;
+  TriMesh m = slotted_block();
+  for (auto& p : m.positions) p.x() += 100;  // placed 100 mm off
+  const auto target = write_stl(dir, m, "far.stl");
+  const auto p = dir.write("p.nc", "G0 X0 Y0 Z1\nG1 Z-0.1 F100\n");
+  std::string err;
+  EXPECT_EQ(run_cli("run " + p + " --stock-box 0,-2,-1,6,2,0 --target " + target + " -o " + dir.file("out"), nullptr, &err),
+            65);
+  EXPECT_NE(err.find("far.stl: error: the target (100,-2,-1,106,2,0 mm) does not overlap the stock"), std::string::npos) << err;
+  EXPECT_TRUE(!std::filesystem::exists(dir.file("out")) || std::filesystem::is_empty(dir.file("out")));
+}
+
 TEST(Compare, MeshFormatsLoadTheSameSolid) {
   TempDir dir;
   const TriMesh m = slotted_block();

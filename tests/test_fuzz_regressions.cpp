@@ -25,6 +25,7 @@ std::size_t replay(const std::string& target, void (*run)(const std::uint8_t*, s
 TEST(FuzzRegressions, GcodeInputsEndInAnAnswer) { EXPECT_GE(replay("gcode", &fuzz::gcode_input), 4u); }
 TEST(FuzzRegressions, JobInputsEndInAnAnswer) { EXPECT_GE(replay("job", &fuzz::job_input), 1u); }
 TEST(FuzzRegressions, MachineInputsEndInAnAnswer) { EXPECT_GE(replay("machine", &fuzz::machine_input), 1u); }
+TEST(FuzzRegressions, MeshInputsEndInAnAnswer) { EXPECT_GE(replay("mesh", &fuzz::mesh_input), 1u); }
 TEST(FuzzRegressions, EnvironmentInputsEndInAnAnswer) { EXPECT_GE(replay("environment", &fuzz::environment_input), 1u); }
 
 }  // namespace

@@ -126,6 +126,10 @@ Action add_run_command(CLI::App& app) {
       target_mesh = args->target.empty()
                         ? sim::load_target(target_file, opt.job.target_scale, opt.job.target_rotate_deg, opt.job.target_offset_mm)
                         : sim::load_target(target_file, 1.0, Vec3::Zero(), Vec3::Zero());
+    if (target_mesh) {
+      opt.target_bounds = target_mesh->bounds();
+      opt.target_file = target_file;
+    }
     const double tolerance = args->tolerance >= 0 ? args->tolerance : opt.job.tolerance_mm.value_or(0.001);
     io::ensure_writable_directory(args->outdir);
 

@@ -182,6 +182,10 @@ TriMesh load_ply(const std::string& path, const std::string& data) {
     if (vprops[i].second == "z") iz = static_cast<int>(i);
   }
   if (ix < 0 || iy < 0 || iz < 0) bad(path, line_no, "PLY vertices need x, y and z");
+  // Every vertex and face takes at least two bytes: a count beyond that is a
+  // lie, refused before anything is allocated for it.
+  if (nv > data.size() / 2 || nf > data.size() / 2)
+    bad(path, line_no, "the header announces more vertices or faces than the file holds");
   Builder b;
   std::vector<std::uint32_t> ids(nv);
   auto size_of = [&](const std::string& t) -> std::size_t {

@@ -42,6 +42,10 @@ struct SimOptions {
   /// On interruption while cutting, return what was cut so far (marked
   /// `interrupted`) instead of throwing InterruptedError.
   bool keep_partial = false;
+  /// Bounds of the target, when there is one: a target that misses the
+  /// stock is refused before any grid is built.
+  std::optional<Aabb> target_bounds;
+  std::string target_file;
   /// Called with the fraction done (0..1) and the NC line being cut.
   std::function<void(double, int)> progress;
 };
