@@ -53,6 +53,7 @@ JointValues Kinematics::solve_tip(const Vec3& tip, const JointValues& q) const {
   int n = 0;
   for (const Joint& j : m_.chain)
     if (j.type == JointType::linear && n < 3) cols[n++] = axis_index(j.axis);
+  if (n == 0) throw GeometryError({}, "machine " + m_.name + " has no linear axis to place the tool tip with");
   for (int k = 0; k < n; ++k) base[static_cast<std::size_t>(cols[k])] = 0;
   const Vec3 p0 = tool_pose(base).translation();
   for (int k = 0; k < n; ++k) {
