@@ -300,7 +300,12 @@ SimResult simulate(const SimOptions& opt) {
     // Nothing reaches the stock: a minimal grid keeps the outputs uniform.
     roi = Aabb{res.stock_box.max - Vec3::Constant(margin), res.stock_box.max};
   }
-  res.stock = std::make_unique<stock::Stock>(res.stock_box, roi.expanded(margin), sopt);
+  try {
+    res.stock = std::make_unique<stock::Stock>(res.stock_box, roi.expanded(margin), sopt);
+  } catch (const InterruptedError& e) {
+    throw InterruptedError(SourceLocation{opt.program, 0, 0, {}}, e.exit_status() - 128,
+                           e.message() + ", before the first cut");
+  }
   res.timing.stock_build_s = seconds_since(t_sim);
 
   // Pass 2: cut.
