@@ -4,50 +4,15 @@
 #include <filesystem>
 #include <cstdlib>
 #include <fstream>
-#include <set>
 #include <sstream>
 
-#include <toml++/toml.h>
+#include "cutsim/config/toml_context.h"
 
 #include "cutsim/core/error.h"
 
 namespace cutsim::io {
 
-namespace {
-
-std::string line_of(const std::string& text, int line) {
-  std::istringstream is(text);
-  std::string s;
-  for (int i = 0; i < line && std::getline(is, s); ++i) {}
-  return s;
-}
-
-struct Ctx {
-  std::string path, text;
-  [[noreturn]] void fail(const toml::source_region& r, const std::string& msg) const {
-    const int line = static_cast<int>(r.begin.line), col = static_cast<int>(r.begin.column);
-    throw ConfigError(SourceLocation{path, line, col, line_of(text, line)}, msg);
-  }
-  void only_keys(const toml::table& t, const std::set<std::string>& keys, const std::string& where) const {
-    for (const auto& [k, v] : t)
-      if (!keys.count(std::string(k.str())))
-        fail(k.source(), "unknown key '" + std::string(k.str()) + "' in " + where);
-  }
-  double number(const toml::node& n, const std::string& what) const {
-    if (auto v = n.value<double>()) {
-      if (!std::isfinite(*v)) fail(n.source(), what + " must be finite");
-      return *v;
-    }
-    fail(n.source(), what + " must be a number");
-  }
-  Vec3 vec3(const toml::node& n, const std::string& what) const {
-    const auto* a = n.as_array();
-    if (!a || a->size() != 3) fail(n.source(), what + " must be an array of 3 numbers");
-    return Vec3(number(*a->get(0), what), number(*a->get(1), what), number(*a->get(2), what));
-  }
-};
-
-}  // namespace
+using Ctx = config::TomlContext;
 
 Aabb parse_box(const std::string& text, const std::string& origin) {
   std::vector<double> v;
@@ -79,13 +44,8 @@ Job load_job(const std::string& path) {
   if (!in) throw InputError(path, "cannot open job file");
   std::stringstream buf;
   buf << in.rdbuf();
-  Ctx ctx{path, buf.str()};
-  toml::table root;
-  try {
-    root = toml::parse(ctx.text, path);
-  } catch (const toml::parse_error& e) {
-    ctx.fail(e.source(), std::string(e.description()));
-  }
+  const Ctx ctx{path, buf.str()};
+  const toml::table root = ctx.parse();
   Job job;
   job.source = path;
   ctx.only_keys(root, {"program", "machine", "stock", "tool", "simulation", "target"}, "the job");

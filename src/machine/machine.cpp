@@ -5,7 +5,7 @@
 #include <map>
 #include <sstream>
 
-#include <toml++/toml.h>
+#include "cutsim/config/toml_context.h"
 
 #include "cutsim/core/error.h"
 
@@ -41,35 +41,7 @@ std::vector<std::string> preset_names() {
 
 namespace {
 
-std::string line_of(const std::string& text, int line) {
-  std::istringstream is(text);
-  std::string s;
-  for (int i = 0; i < line && std::getline(is, s); ++i) {}
-  return s;
-}
-
-struct Ctx {
-  std::string path, text;
-  [[noreturn]] void fail(const toml::source_region& r, const std::string& msg) const {
-    const int line = static_cast<int>(r.begin.line), col = static_cast<int>(r.begin.column);
-    throw ConfigError(SourceLocation{path, line, col, line_of(text, line)}, msg);
-  }
-  void only_keys(const toml::table& t, std::initializer_list<const char*> keys, const std::string& where) const {
-    for (const auto& [k, v] : t) {
-      bool ok = false;
-      for (const char* kk : keys) ok |= (k.str() == kk);
-      if (!ok) fail(k.source(), "unknown key '" + std::string(k.str()) + "' in " + where);
-    }
-  }
-  double number(const toml::node& n, const std::string& what) const {
-    if (auto v = n.value<double>(); v && std::isfinite(*v)) return *v;
-    fail(n.source(), what + " must be a finite number");
-  }
-  Vec3 vec3(const toml::node& n, const std::string& what) const {
-    const auto* a = n.as_array();
-    if (!a || a->size() != 3) fail(n.source(), what + " must be an array of 3 numbers");
-    return Vec3(number(*a->get(0), what), number(*a->get(1), what), number(*a->get(2), what));
-  }
+struct Ctx : config::TomlContext {
   JointError error(const toml::node& n, const std::string& where) const {
     const auto* t = n.as_table();
     if (!t) fail(n.source(), where + " must be a table {dx, dy, dz, alpha, beta, gamma}");
@@ -86,13 +58,8 @@ struct Ctx {
 };
 
 Machine parse_machine(const std::string& path, const std::string& text) {
-  Ctx ctx{path, text};
-  toml::table root;
-  try {
-    root = toml::parse(text, path);
-  } catch (const toml::parse_error& e) {
-    ctx.fail(e.source(), std::string(e.description()));
-  }
+  const Ctx ctx{{path, text}};
+  const toml::table root = ctx.parse();
   ctx.only_keys(root, {"name", "description", "joint", "tool_setting", "workpiece_setting", "rapid_fraction"}, "the machine");
   Machine m;
   m.source = path;
