@@ -330,6 +330,7 @@ void Interpreter::execute(const gcode::Block& block, std::vector<Move>& out) {
     m.kind = state_.motion;
     m.start = pos_;
     m.tool = state_.tool_in_spindle;
+    m.spindle_rpm = state_.spindle_rpm;
     m.normal = state_.plane_normal;
     m.tcp = state_.tcp;
     if (state_.tool_axis_control) m.tool_axis = state_.tilt.linear() * Vec3::UnitZ();

@@ -89,20 +89,32 @@ Pose Planner::pose_at(const motion::Move& m, const PlannedMove& p, double s) con
 }
 
 sweep::Sweep Planner::sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const {
-  if (exact_) return sweep::sweep_move(m, tool, sweep::SweepOptions{opt_.chord_tolerance_mm});
+  const tool::Shape shape = tool::cutting_shape(tool);
+  if (tool.kind == tool::ToolKind::flycutter && m.spindle_rpm > 0 && m.kind != motion::MotionKind::rapid &&
+      p.t1 > p.t0) {
+    // One swing torus per revolution, at the instants the program's time
+    // line puts them (phase continuous from program start).
+    const double rev_s = 60.0 / m.spindle_rpm;
+    std::vector<Pose> poses;
+    for (double k = std::floor(p.t0 / rev_s) + 1; k * rev_s <= p.t1; k += 1)
+      poses.push_back(pose_at(m, p, (k * rev_s - p.t0) / (p.t1 - p.t0)));
+    return sweep::sweep_tori(poses, std::get<tool::SwingTorus>(shape));
+  }
+  if (exact_ && std::holds_alternative<tool::RevolvedEnvelope>(shape))
+    return sweep::sweep_move(m, tool, sweep::SweepOptions{opt_.chord_tolerance_mm});
   const bool rotary_fixed = (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
   if (!m.is_arc() && rotary_fixed) {
     // Rotary joints held: the tool pose is an affine image of the straight
     // joint motion, so the tip runs a straight line at a fixed orientation.
     const Pose a = pose_at(m, p, 0.0), b = pose_at(m, p, 1.0);
-    return sweep::sweep_line(a.translation(), b.translation(), a.linear(), tool);
+    return sweep::sweep_line(a.translation(), b.translation(), a.linear(), shape);
   }
   const int pieces = m.is_arc() ? std::max(4, static_cast<int>(std::ceil(std::fabs(m.arc_sweep_angle()) / (kPi / 8)))) : 4;
   if (!opt_.interest.empty()) {
-    // Coarse bound: tips at 64 points, grown by the envelope's reach and
-    // the largest chord sagitta those points can leave.
-    const tool::RevolvedEnvelope env = tool::cutting_envelope(tool);
-    const double reach = env.core_offset + env.core_length + env.corner_radius + env.disk_radius;
+    // Coarse bound: tips at 64 points, grown by the shape's reach and the
+    // largest chord sagitta those points can leave.
+    const Aabb lb = tool::shape_bounds(shape);
+    const double reach = std::max(lb.min.cwiseAbs().maxCoeff(), lb.max.cwiseAbs().maxCoeff()) * std::sqrt(3.0);
     Aabb b;
     double step = 0;
     Vec3 prev = pose_at(m, p, 0.0).translation();
@@ -115,7 +127,7 @@ sweep::Sweep Planner::sweep(const motion::Move& m, const PlannedMove& p, const t
     }
     if (!b.expanded(reach + step).overlaps(opt_.interest)) return {};
   }
-  return sweep::sweep_poses([&](double s) { return pose_at(m, p, s); }, tool, opt_.sweep_tolerance_mm, pieces);
+  return sweep::sweep_poses([&](double s) { return pose_at(m, p, s); }, shape, opt_.sweep_tolerance_mm, pieces);
 }
 
 void Planner::monitor(const motion::Move& m, const PlannedMove& p, machine::AxisMonitor& mon) const {

@@ -1,6 +1,7 @@
 #include "cutsim/sweep/sweep.h"
 
 #include <cmath>
+#include <stdexcept>
 
 namespace cutsim::sweep {
 
@@ -166,18 +167,108 @@ LinearPrim make_linear(const Vec3& base0, const Vec3& base1, const tool::Revolve
   return lp;
 }
 
+double profile_distance(const ProfilePrim& pp, const Vec3& x) {
+  const Vec3 p = pp.to_local * (x - pp.origin);
+  const Vec3& d = pp.d_local;
+  const tool::EdgeProfile& e = pp.edge;
+  const double ax = std::fabs(d.x());
+  if (ax > 1e-9 * std::max(d.norm(), 1e-12)) {
+    // A prism: cross-sections are the profile moved along the in-plane
+    // part of d; the side faces lean by that motion.
+    const double s = clamp01(p.x() / d.x());
+    const double y = p.y() - s * d.y(), z = p.z() - s * d.z();
+    double gy = 0, gz = 0;
+    const double a2 = tool::profile_distance_2d(e, y, z, &gy, &gz);
+    const double f2 = ax / std::hypot(ax, gy * d.y() + gz * d.z());
+    const double fc = ax / std::hypot(ax, d.z());
+    const double a = std::max(a2 * f2, (z - e.height) * fc);
+    const double b = d.x() > 0 ? std::max(-p.x(), p.x() - d.x()) : std::max(p.x(), d.x() - p.x());
+    return prism_sd(a, b);
+  }
+  // Motion within the rake plane: a sheet of no thickness.
+  const double a = golden_min([&](double s) {
+    const double y = p.y() - s * d.y(), z = p.z() - s * d.z();
+    return std::max(std::max(tool::profile_distance_2d(e, y, z), z - e.height), 0.0);
+  });
+  return std::hypot(p.x(), a);
+}
+
+Eigen::Matrix3d turn_z(double c, double s) {
+  Eigen::Matrix3d Rz;
+  Rz << c, -s, 0, s, c, 0, 0, 0, 1;
+  return Rz;
+}
+
+ProfilePrim make_profile(const Vec3& tip0, const Vec3& tip1, const tool::EdgeProfile& edge, const Eigen::Matrix3d& R) {
+  ProfilePrim pp;
+  pp.origin = tip0;
+  const Eigen::Matrix3d Rl = R * turn_z(edge.cos_o, edge.sin_o);
+  pp.to_local = Rl.transpose();
+  pp.d_local = pp.to_local * (tip1 - tip0);
+  pp.edge = edge;
+  pp.edge.cos_o = 1;
+  pp.edge.sin_o = 0;
+  const Aabb local = tool::shape_bounds(pp.edge);
+  pp.bounds = world_box(local, Rl, tip0);
+  pp.bounds.extend(world_box(local, Rl, tip1));
+  return pp;
+}
+
+TorusPrim make_torus(const Pose& pose, const tool::SwingTorus& t) {
+  TorusPrim tp;
+  tp.origin = pose.translation();
+  tp.to_local = pose.linear().transpose();
+  tp.torus = t;
+  tp.bounds = world_box(tool::shape_bounds(tool::Shape(t)), pose.linear(), tp.origin);
+  return tp;
+}
+
+// Appends the straight sweep of `shape` from tip0 to tip1 at orientation R.
+void append_line(Sweep& s, const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, const tool::Shape& shape) {
+  if (const auto* env = std::get_if<tool::RevolvedEnvelope>(&shape)) {
+    const Vec3 lift = env->core_offset * R.col(2);
+    s.prims.emplace_back(make_linear(tip0 + lift, tip1 + lift, *env, R));
+  } else if (const auto* edge = std::get_if<tool::EdgeProfile>(&shape)) {
+    s.prims.emplace_back(make_profile(tip0, tip1, *edge, R));
+  } else if (const auto* torus = std::get_if<tool::SwingTorus>(&shape)) {
+    // Steps whose scallop (swing - sqrt(swing^2 - step^2/4)) stays below 0.1 um.
+    const double step = std::sqrt(8 * torus->swing * 1e-4);
+    const int n = std::max(1, static_cast<int>(std::ceil((tip1 - tip0).norm() / step)));
+    for (int i = 0; i <= n; ++i) {
+      Pose p = Pose::Identity();
+      p.linear() = R;
+      p.translation() = tip0 + (tip1 - tip0) * (static_cast<double>(i) / n);
+      s.prims.emplace_back(make_torus(p, *torus));
+    }
+  } else {
+    throw std::logic_error("a flank body is not a cutting shape");
+  }
+}
+
 }  // namespace
 
 double distance(const Primitive& p, const Vec3& x) {
   return std::visit([&](const auto& q) -> double {
     using T = std::decay_t<decltype(q)>;
     if constexpr (std::is_same_v<T, LinearPrim>) return linear_distance(q, x);
-    else return arc_distance(q, x);
+    else if constexpr (std::is_same_v<T, ArcPrim>) return arc_distance(q, x);
+    else if constexpr (std::is_same_v<T, ProfilePrim>) return profile_distance(q, x);
+    else return tool::shape_distance(q.torus, q.to_local * (x - q.origin));
   }, p);
 }
 
 const Aabb& bounds(const Primitive& p) {
   return std::visit([](const auto& q) -> const Aabb& { return q.bounds; }, p);
+}
+
+Aabb world_box(const Aabb& local, const Eigen::Matrix3d& R, const Vec3& tip) {
+  Aabb b;
+  for (int i = 0; i < 8; ++i) {
+    const Vec3 c((i & 1) ? local.max.x() : local.min.x(), (i & 2) ? local.max.y() : local.min.y(),
+                 (i & 4) ? local.max.z() : local.min.z());
+    b.extend(tip + R * c);
+  }
+  return b;
 }
 
 double Sweep::distance(const Vec3& x) const {
@@ -226,19 +317,29 @@ Sweep sweep_move(const motion::Move& m, const tool::Tool& tool, const SweepOptio
   return s;
 }
 
-Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, const tool::Tool& tool) {
-  const tool::RevolvedEnvelope env = tool::cutting_envelope(tool);
-  const Vec3 lift = env.core_offset * R.col(2);
+Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, const tool::Shape& shape) {
   Sweep s;
-  s.prims.emplace_back(make_linear(tip0 + lift, tip1 + lift, env, R));
-  s.bounds = bounds(s.prims.front());
+  append_line(s, tip0, tip1, R, shape);
+  for (const Primitive& p : s.prims) s.bounds.extend(bounds(p));
   return s;
 }
 
-Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Tool& tool, double tolerance_mm,
+Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, const tool::Tool& tool) {
+  return sweep_line(tip0, tip1, R, tool::cutting_shape(tool));
+}
+
+Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Shape& shape, double tolerance_mm,
                   int min_pieces) {
-  const tool::RevolvedEnvelope env = tool::cutting_envelope(tool);
-  const double reach = env.core_offset + env.core_length + env.corner_radius;  // tip to the top of the envelope
+  // Tip to the top of an envelope; to the farthest corner of other shapes.
+  double reach = 0;
+  if (const auto* env = std::get_if<tool::RevolvedEnvelope>(&shape)) {
+    reach = env->core_offset + env->core_length + env->corner_radius;
+  } else {
+    const Aabb lb = tool::shape_bounds(shape);
+    for (int i = 0; i < 8; ++i)
+      reach = std::max(reach, Vec3((i & 1) ? lb.max.x() : lb.min.x(), (i & 2) ? lb.max.y() : lb.min.y(),
+                                   (i & 4) ? lb.max.z() : lb.min.z()).norm());
+  }
   Sweep s;
   struct Node { double t0, t1; Pose p0, p1; int depth; };
   std::vector<Node> stack;
@@ -265,10 +366,15 @@ Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Tool& 
       stack.push_back({nd.t0, tm, nd.p0, pm, nd.depth + 1});
       continue;
     }
-    const Eigen::Matrix3d R = pm.linear();
-    const Vec3 lift = env.core_offset * R.col(2);
-    s.prims.emplace_back(make_linear(nd.p0.translation() + lift, nd.p1.translation() + lift, env, R));
+    append_line(s, nd.p0.translation(), nd.p1.translation(), pm.linear(), shape);
   }
+  for (const Primitive& p : s.prims) s.bounds.extend(bounds(p));
+  return s;
+}
+
+Sweep sweep_tori(const std::vector<Pose>& poses, const tool::SwingTorus& torus) {
+  Sweep s;
+  for (const Pose& p : poses) s.prims.emplace_back(make_torus(p, torus));
   for (const Primitive& p : s.prims) s.bounds.extend(bounds(p));
   return s;
 }

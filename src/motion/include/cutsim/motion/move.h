@@ -31,6 +31,7 @@ struct Move {
   double feed_mm_per_min = 0;  ///< 0 for rapids and for inverse-time moves without length
   double duration_s = 0;       ///< inverse time (G93): the move's time; else 0
   int tool = 0;                ///< T number in the spindle
+  double spindle_rpm = 0;      ///< S word in force
   bool tcp = false;            ///< tool centre point control (G43.4/G43.5) active
   Vec3 tool_axis = Vec3::UnitZ();  ///< requested tool axis in the workpiece frame (G53.1)
 

@@ -38,7 +38,27 @@ struct ArcPrim {
   Aabb bounds;
 };
 
-using Primitive = std::variant<LinearPrim, ArcPrim>;
+/// A non-rotating tool's cutting edge profile moved along a straight line
+/// at a fixed orientation: a prism (sheared when the move leaves the
+/// cutting direction). Sign exact; distance exact for moves along the
+/// cutting direction, a first-order estimate for sheared prisms.
+struct ProfilePrim {
+  Vec3 origin;                ///< tip at the start
+  Eigen::Matrix3d to_local;   ///< rows: cutting direction, across, tool axis
+  Vec3 d_local;               ///< the move in local coordinates
+  tool::EdgeProfile edge;     ///< orientation folded into to_local
+  Aabb bounds;
+};
+
+/// A fly-cutter's revolution at one place: the swing torus at a pose. Exact.
+struct TorusPrim {
+  Vec3 origin;                ///< tip
+  Eigen::Matrix3d to_local;
+  tool::SwingTorus torus;
+  Aabb bounds;
+};
+
+using Primitive = std::variant<LinearPrim, ArcPrim, ProfilePrim, TorusPrim>;
 
 double distance(const Primitive& p, const Vec3& x);
 const Aabb& bounds(const Primitive& p);
@@ -56,13 +76,19 @@ struct Sweep {
   double distance(const Vec3& x) const;
 };
 
-/// Builds the sweep of `move` for a tool whose axis is +Z (3-axis milling).
+/// Box of a tool-frame box placed at `tip` with orientation `R`.
+Aabb world_box(const Aabb& local, const Eigen::Matrix3d& R, const Vec3& tip);
+
+/// Builds the sweep of `move` for a rotating end mill whose axis is +Z (3-axis milling).
 /// Straight moves and G17 arcs of constant radius and height are exact;
 /// other arcs become chords within `opt.chord_tolerance_mm`.
 Sweep sweep_move(const motion::Move& move, const tool::Tool& tool, const SweepOptions& opt = {});
 
 /// A straight move of the tool tip from `tip0` to `tip1` with the tool frame
-/// rotated by `R` (the tool axis is R's third column). Exact.
+/// rotated by `R` (the tool axis is R's third column). Exact for envelopes
+/// and profiles; a fly-cutter's torus is placed at steps whose scallop
+/// stays below 0.1 um.
+Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, const tool::Shape& shape);
 Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, const tool::Tool& tool);
 
 /// A move whose tool pose (tip at the origin, axis +Z) is `pose_at(t)`,
@@ -70,8 +96,11 @@ Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, c
 /// orientation at its middle, bisected until the tip and the top of the
 /// envelope stay within `tolerance_mm` of the chords and the orientation
 /// held moves the top by at most `tolerance_mm`. Starts from `min_pieces`.
-Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Tool& tool, double tolerance_mm,
+Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Shape& shape, double tolerance_mm,
                   int min_pieces = 4);
+
+/// Fly-cutter revolutions: the swing torus at each pose.
+Sweep sweep_tori(const std::vector<Pose>& poses, const tool::SwingTorus& torus);
 
 /// A single tool pose (no motion): the envelope at `tip` with axis +Z.
 Sweep tool_at(const Vec3& tip, const tool::Tool& tool);

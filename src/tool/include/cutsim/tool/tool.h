@@ -1,26 +1,59 @@
 #pragma once
-// Rotating end mills. The control point is the tool tip on the tool axis:
-// the lowest point of a ball end mill, the centre of a flat end.
+// Tools as sets of named regions with exact distance queries.
+//
+// The tool frame: the control point (tool tip) at the origin, the tool axis
+// (towards the spindle or the tool shank) along +Z. Rotating tools are
+// solids of revolution about +Z, except the fly-cutter, whose spindle axis
+// is the tool frame's +Y: its tip circle (radius `swing`) lies in the XZ
+// plane and its lowest point is the tip. Non-rotating diamond tools cut
+// in their cutting direction, the tool frame's +X turned about +Z by
+// `orientation_deg`; their rake face faces the cutting direction and their
+// body lies behind it.
+#include <map>
 #include <string>
+#include <variant>
+#include <vector>
+
+#include "cutsim/core/geometry.h"
 
 namespace cutsim::tool {
 
-enum class ToolKind { ball, flat, bull };
+enum class ToolKind { ball, flat, bull, flycutter, nose, vtool };
+
+/// "ball", "flat", "bull", "flycutter", "nose" or "vtool".
+const char* kind_name(ToolKind k);
 
 struct Tool {
   ToolKind kind = ToolKind::ball;
   std::string name;            ///< as specified, e.g. "ball:d=1"
+  int number = 0;              ///< T number (0: not from a library)
+  // End mills (ball, flat, bull).
   double diameter_mm = 1.0;
-  double corner_radius_mm = 0;  ///< ball: d/2; flat: 0; bull: r
+  double corner_radius_mm = 0;  ///< ball: d/2; flat: 0; bull: r; fly-cutter and nose: nose radius
   double flute_length_mm = 0;   ///< cutting length from the tip; default 2 d
+  double neck_diameter_mm = 0, neck_length_mm = 0;      ///< 0: no neck
+  double shank_diameter_mm = 0, shank_length_mm = 0;    ///< default: d and 30 mm
+  double holder_diameter_mm = 0, holder_length_mm = 0;  ///< 0: no holder envelope
+  // Fly-cutter.
+  double swing_radius_mm = 0;   ///< spindle axis to the tip
+  // Non-rotating diamond tools (nose, vtool).
+  double included_angle_deg = 0;
+  double rake_angle_deg = 0;
+  double clearance_angle_deg = 0;
+  double orientation_deg = 0;   ///< cutting direction: +X turned about +Z
+  double edge_height_mm = 0;    ///< cutting edge (and body) height above the tip
+  double body_length_mm = 0;    ///< body behind the rake face, along the cutting direction
 
-  double radius() const { return diameter_mm / 2; }
+  bool rotating() const { return kind != ToolKind::nose && kind != ToolKind::vtool; }
+  /// Half the width the tool cuts across its axis (fly-cutter: the swing).
+  double radius() const;
 };
 
 /// The cutting envelope of a rotating tool as a Minkowski sum:
 /// disk(radius disk_radius, normal to the axis) + ball(corner_radius) +
 /// axial segment [0, core_length], placed with its core base at
-/// `core_offset` along the axis above the tip.
+/// `core_offset` along the axis above the tip. With corner_radius 0 it is a
+/// cylinder: neck, shank and holder are such envelopes.
 struct RevolvedEnvelope {
   double disk_radius = 0;
   double corner_radius = 0;
@@ -28,12 +61,72 @@ struct RevolvedEnvelope {
   double core_offset = 0;
 };
 
+/// A non-rotating tool's cutting edge: the region Q in its rake plane
+/// (x = 0 of the cutting frame) bounded by the edge: a wedge of half angle
+/// `half_angle` opening along +Z, rounded by `nose_radius` (0: pointed),
+/// tip at the origin, cut off at `height`. Zero thickness: it removes what
+/// it sweeps through.
+struct EdgeProfile {
+  double nose_radius = 0;
+  double half_angle = kPi / 4;
+  double height = 0.5;
+  double cos_o = 1, sin_o = 0;  ///< cutting direction in the tool frame
+};
+
+/// A non-rotating tool's body behind its rake face: the edge profile Q
+/// drawn back along -x, its cross-section shrinking by tan(clearance) per
+/// unit length (the clearance faces), bounded by the rake face (tilted back
+/// by the rake angle), the top at `height` and the back at `length`.
+struct FlankBody {
+  EdgeProfile edge;
+  double clearance = 0;  ///< rad
+  double rake = 0;       ///< rad
+  double length = 1;
+};
+
+/// A fly-cutter's cutting region over one revolution: a torus about the
+/// tool frame's Y axis through (0, 0, swing), tube radius `nose_radius`.
+struct SwingTorus {
+  double swing = 0;
+  double nose_radius = 0;
+};
+
+using Shape = std::variant<RevolvedEnvelope, EdgeProfile, FlankBody, SwingTorus>;
+
+/// Signed distance (mm, negative inside) from a point in the tool frame to
+/// a shape at rest. Exact for envelopes, the torus and the profile; for the
+/// flank body exact inside along the plane faces and a lower bound elsewhere.
+double shape_distance(const Shape& s, const Vec3& p);
+/// Box of the shape in the tool frame.
+Aabb shape_bounds(const Shape& s);
+
+/// Signed distance in the rake plane to the edge profile Q (no height cap):
+/// negative inside. Also gives the unit outward gradient (gy, gz).
+double profile_distance_2d(const EdgeProfile& e, double y, double z, double* gy = nullptr, double* gz = nullptr);
+
+struct Region {
+  std::string name;  ///< "clearance-face", "neck", "shank", "holder"
+  Shape shape;
+};
+
+/// The part that removes material.
+Shape cutting_shape(const Tool& t);
+/// The parts that only touch material (empty when the tool has none).
+std::vector<Region> contact_regions(const Tool& t);
+
+/// The cutting envelope of a rotating tool (not for non-rotating tools).
 RevolvedEnvelope cutting_envelope(const Tool& t);
 
-/// Parses `kind:key=value,...`: `ball:d=1`, `flat:d=6,l=12`, `bull:d=2,r=0.2`.
-/// Keys: d (diameter, mm), r (corner radius, mm; bull only), l (flute length).
+/// Parses `kind:key=value,...`, for example `ball:d=1`, `flat:d=6,l=12`,
+/// `bull:d=2,r=0.2`, `flycutter:swing=18,r=2`, `nose:r=0.9789,clearance=10`,
+/// `vtool:angle=90,clearance=7`. The keys are listed in the README.
 /// @throw ConfigError naming the spec and what is wrong (unknown kind, key,
-///        or a non-positive size). `origin` names where the spec came from.
+///        or a size out of range). `origin` names where the spec came from.
 Tool parse_tool_spec(const std::string& spec, const std::string& origin = "--tool");
+
+/// Builds a tool of `kind` from short keys (the spec's) with defaults filled
+/// in and every size checked. @throw ConfigError naming `origin` and `what`.
+Tool make_tool(const std::string& kind, const std::map<std::string, double>& keys, const std::string& what,
+               const std::string& origin);
 
 }  // namespace cutsim::tool
