@@ -30,6 +30,9 @@ struct RunArgs {
   std::string format = "text";
   std::string stock_box;
   std::string tool;
+  std::string tools;
+  double contact_tolerance = -1;
+  bool stop_at_contact = false;
   double mesh_adaptivity = 0.01;
   std::string dialect;
   bool block_delete = false;
@@ -72,7 +75,14 @@ Action add_run_command(CLI::App& app) {
   cmd->add_option("--voxel", args->voxel, "voxel size, mm")->check(CLI::PositiveNumber);
   cmd->add_option("--format", args->format, "console output: text or json")->check(CLI::IsMember({"text", "json"}));
   cmd->add_option("--stock-box", args->stock_box, "stock box XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX in mm");
-  cmd->add_option("--tool", args->tool, "tool spec: ball:d=1, flat:d=6[,l=12], bull:d=2,r=0.2");
+  cmd->add_option("--tool", args->tool,
+                  "tool spec: ball:d=1, flat:d=6[,l=12], bull:d=2,r=0.2, flycutter:swing=18,r=2, "
+                  "nose:r=0.9789,clearance=10, vtool:angle=90,clearance=7 (keys in the README)");
+  cmd->add_option("--tools", args->tools, "tool library by T number: TOML ([[tool]]) or a LinuxCNC .tbl table");
+  cmd->add_option("--contact-tolerance", args->contact_tolerance,
+                  "contacts shallower than this are not reported, mm (default: a quarter voxel)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_flag("--stop-at-contact", args->stop_at_contact, "stop at the first contact and write the stock as it is then");
   cmd->add_option("--dialect", args->dialect, "G-code dialect: rs274ngc (default) or fanuc")
       ->check(CLI::IsMember({"rs274ngc", "fanuc"}));
   cmd->add_flag("--block-delete", args->block_delete, "skip lines that start with '/'");
@@ -110,6 +120,9 @@ Action add_run_command(CLI::App& app) {
     if (!job_path.empty()) opt.job = io::load_job(job_path);
     if (!args->stock_box.empty()) opt.stock_box = io::parse_box(args->stock_box, "--stock-box");
     if (!args->tool.empty()) opt.tool = tool::parse_tool_spec(args->tool, "--tool");
+    if (!args->tools.empty()) opt.tools_file = args->tools;
+    if (args->contact_tolerance >= 0) opt.contact_tolerance_mm = args->contact_tolerance;
+    opt.stop_at_first_contact = args->stop_at_contact;
     if (args->voxel > 0) opt.voxel_mm = args->voxel;
     if (!args->dialect.empty()) opt.dialect = io::parse_dialect(args->dialect, "--dialect");
     opt.block_delete = args->block_delete;
@@ -183,7 +196,7 @@ Action add_run_command(CLI::App& app) {
       std::cerr << res.interrupt_message << "\npartial result written (" << out.glb << ")\n";
       return res.interrupt_status;
     }
-    return 0;
+    return res.contacts.empty() ? 0 : static_cast<int>(ExitCode::contacts);
   };
 }
 

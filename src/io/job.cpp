@@ -132,7 +132,13 @@ Job load_job(const std::string& path) {
     ctx.fail(root.get("stock")->source(), "[stock] must be a table");
   }
   if (auto* t = root["tool"].as_table()) {
-    ctx.only_keys(*t, {"spec"}, "[tool]");
+    ctx.only_keys(*t, {"spec", "library"}, "[tool]");
+    if (auto* l = t->get("library")) {
+      const auto v = l->value<std::string>();
+      if (!v) ctx.fail(l->source(), "[tool] library must be a string (a .toml or .tbl file)");
+      const auto dir = std::filesystem::path(path).parent_path();
+      job.tool_library = std::filesystem::path(*v).is_relative() ? (dir / *v).string() : *v;
+    }
     if (auto* s = t->get("spec")) {
       const auto v = s->value<std::string>();
       if (!v) ctx.fail(s->source(), "[tool] spec must be a string such as \"ball:d=1\"");
@@ -146,7 +152,17 @@ Job load_job(const std::string& path) {
     ctx.fail(root.get("tool")->source(), "[tool] must be a table");
   }
   if (auto* s = root["simulation"].as_table()) {
-    ctx.only_keys(*s, {"voxel_mm", "start", "memory_limit_mb"}, "[simulation]");
+    ctx.only_keys(*s, {"voxel_mm", "start", "memory_limit_mb", "contact_tolerance_mm", "stop_at_first_contact"},
+                  "[simulation]");
+    if (auto* v = s->get("contact_tolerance_mm")) {
+      job.contact_tolerance_mm = ctx.number(*v, "contact_tolerance_mm");
+      if (!(*job.contact_tolerance_mm >= 0)) ctx.fail(v->source(), "contact_tolerance_mm must not be negative");
+    }
+    if (auto* v = s->get("stop_at_first_contact")) {
+      const auto b = v->value<bool>();
+      if (!b) ctx.fail(v->source(), "stop_at_first_contact must be true or false");
+      job.stop_at_first_contact = *b;
+    }
     if (auto* v = s->get("voxel_mm")) {
       job.voxel_mm = ctx.number(*v, "voxel_mm");
       if (!(*job.voxel_mm > 0)) ctx.fail(v->source(), "voxel_mm must be positive");

@@ -29,6 +29,11 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   j["tool"] = {{"spec", r.tool.name}, {"diameter_mm", r.tool.diameter_mm},
                {"corner_radius_mm", r.tool.corner_radius_mm}, {"flute_length_mm", r.tool.flute_length_mm},
                {"control_point", "tool tip on the axis"}};
+  if (!r.tool_library.empty()) j["tool_library"] = r.tool_library;
+  nlohmann::ordered_json tu = nlohmann::ordered_json::array();
+  for (const auto& t : r.tools_used)
+    tu.push_back({{"number", t.number}, {"name", t.name}, {"kind", tool::kind_name(t.kind)}});
+  j["tools_used"] = tu;
   j["stock_box_mm"] = box_json(r.stock_box);
   j["roi_mm"] = box_json(r.stock->roi());
   j["voxel_size_mm"] = r.voxel_mm;
@@ -59,6 +64,14 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
     j["tolerance_mm"] = c.tolerance_mm;
     j["fraction_in_tolerance"] = c.fraction_in_tolerance;
   }
+  j["contact_tolerance_mm"] = r.contact_tolerance_mm;
+  if (r.stopped_at_contact) j["stopped_at_contact"] = true;
+  nlohmann::ordered_json cs = nlohmann::ordered_json::array();
+  for (const auto& c : r.contacts)
+    cs.push_back({{"line", c.line}, {"text", c.text}, {"region", c.region}, {"rapid", c.rapid},
+                  {"position_mm", {c.where.x(), c.where.y(), c.where.z()}}, {"depth_mm", c.depth_mm},
+                  {"depth_at_least", c.at_least}, {"poses", c.poses}});
+  j["contacts"] = cs;
   j["active_voxels"] = st.active_voxels;
   j["leaf_nodes"] = st.leaf_nodes;
   nlohmann::ordered_json w = nlohmann::ordered_json::array();
@@ -69,7 +82,7 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   j["timing_s"] = {{"parse", r.timing.parse_s}, {"simulate", r.timing.simulate_s},
                    {"export", r.timing.export_s}, {"total", r.timing.total_s},
                    {"stock_build", r.timing.stock_build_s}, {"plan_and_sweep", r.timing.plan_sweep_s},
-                   {"stock_update", r.timing.stock_update_s}};
+                   {"stock_update", r.timing.stock_update_s}, {"contact_check", r.timing.contact_check_s}};
   j["peak_rss_mb"] = peak_rss_mb();
   return j.dump(2) + "\n";
 }
@@ -104,6 +117,10 @@ std::string report_text(const SimResult& r, const ReportOutputs& out) {
   }
   if (r.axis_limit_violations.size() > shown)
     os << "... and " << r.axis_limit_violations.size() - shown << " more axis-limit violations (see the report)\n";
+  const std::size_t shown_c = std::min<std::size_t>(r.contacts.size(), 20);
+  for (std::size_t i = 0; i < shown_c; ++i) os << format_contact(r.contacts[i], r.program) << "\n";
+  if (r.contacts.size() > shown_c) os << "... and " << r.contacts.size() - shown_c << " more contacts (see the report)\n";
+  if (r.stopped_at_contact) os << "stopped at the first contact (stop_at_first_contact)\n";
   for (const auto& a : r.amplitude_limits) {
     std::snprintf(buf, sizeof buf, "amplitude limit %c at %.3g Hz: %.4g mm (%s)\n", a.axis, a.frequency_hz,
                   a.amplitude_mm, a.limited_by.c_str());

@@ -10,6 +10,7 @@
 #include "cutsim/core/interrupt.h"
 #include "cutsim/gcode/program_reader.h"
 #include "cutsim/io/mesh_io.h"
+#include "cutsim/io/tool_library.h"
 #include "cutsim/sim/planner.h"
 #include "cutsim/sweep/sweep.h"
 
@@ -174,9 +175,42 @@ SimResult simulate(const SimOptions& opt) {
   ProgramOptions popt;
   popt.dialect = opt.dialect ? *opt.dialect : opt.job.dialect ? *opt.job.dialect : gcode::Dialect::rs274ngc;
   popt.block_delete = opt.block_delete || opt.job.block_delete.value_or(false);
-  res.tool = opt.tool ? *opt.tool : opt.job.tool ? *opt.job.tool : tool::parse_tool_spec("ball:d=1", "default");
-  if (!opt.tool && !opt.job.tool) res.defaults.notes.push_back("tool: ball:d=1 (default; set --tool or [tool] spec)");
-  const double tool_r = res.tool.radius();
+  // Tools: a library resolves T numbers; a spec is the tool without a
+  // library, or before the first tool change with one.
+  std::optional<io::ToolLibrary> library;
+  if (opt.tools_file) library = io::load_tool_library(*opt.tools_file);
+  else if (opt.job.tool_library) library = io::load_tool_library(*opt.job.tool_library);
+  std::optional<tool::Tool> spec_tool = opt.tool ? opt.tool : opt.job.tool;
+  if (!spec_tool && !library) {
+    spec_tool = tool::parse_tool_spec("ball:d=1", "default");
+    res.defaults.notes.push_back("tool: ball:d=1 (default; set --tool, --tools or [tool] spec)");
+  }
+  if (library) res.tool_library = library->source;
+  bool noted_t0 = false;
+  auto tool_for = [&](const motion::Move& m) -> const tool::Tool& {
+    if (!library) return *spec_tool;
+    if (m.tool == 0) {
+      if (spec_tool) return *spec_tool;
+      const tool::Tool& first = library->tools.begin()->second;
+      if (!noted_t0) {
+        res.defaults.notes.push_back("tool: moves before the first tool change use T" + std::to_string(first.number) +
+                                     " (the library's first; set --tool for them)");
+        noted_t0 = true;
+      }
+      return first;
+    }
+    if (const tool::Tool* t = library->find(m.tool)) return *t;
+    std::string have;
+    for (const auto& [n, t] : library->tools) have += (have.empty() ? "T" : ", T") + std::to_string(n);
+    throw ConfigError(SourceLocation{opt.program, m.line, 1, m.text ? *m.text : std::string()},
+                      "tool T" + std::to_string(m.tool) + " is not in the tool library " + library->source +
+                          " (it holds " + have + ")");
+  };
+  auto note_use = [&](const tool::Tool& t) {
+    for (const auto& u : res.tools_used)
+      if (u.number == t.number && u.name == t.name) return;
+    res.tools_used.push_back(t);
+  };
 
   // The machine, its errors and the air.
   machine::Machine mach = machine::load_machine(opt.machine ? *opt.machine : opt.job.machine.value_or("xyz"));
@@ -208,7 +242,9 @@ SimResult simulate(const SimOptions& opt) {
     planner.set_file(opt.program);
     const CheckResult cr = stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
       const PlannedMove pm = planner.plan(m);
+      const tool::Tool& t = tool_for(m);
       if (m.is_cutting_feed()) {
+        note_use(t);
         ++res.cutting_moves;
         if (kin.is_identity()) cut_path.extend(m.path_bounds());
         else
@@ -220,6 +256,8 @@ SimResult simulate(const SimOptions& opt) {
     res.moves = cr.moves;
     res.warnings = cr.warnings;
   }
+  res.tool = !res.tools_used.empty() ? res.tools_used.front() : spec_tool ? *spec_tool : library->tools.begin()->second;
+  const double tool_r = res.tool.radius();
   if (!stock_box) {
     if (cut_path.empty())
       throw ConfigError(SourceLocation{opt.program, 0, 0, {}},
@@ -254,9 +292,14 @@ SimResult simulate(const SimOptions& opt) {
   if (opt.voxel_mm) res.voxel_mm = *opt.voxel_mm;
   else if (opt.job.voxel_mm) res.voxel_mm = *opt.job.voxel_mm;
   else {
-    res.voxel_mm = nice_ceil(std::max(tool_r / 25.0, std::sqrt(area / 2e7)));
+    // The size that shapes the surface: the radius of an end mill, the nose
+    // radius of a fly-cutter or nose tool, a fifth of a V tool's edge.
+    const tool::Tool& t = res.tool;
+    const double feature = t.kind == tool::ToolKind::flycutter || t.kind == tool::ToolKind::nose ? t.corner_radius_mm
+                           : t.kind == tool::ToolKind::vtool ? t.edge_height_mm / 5 : tool_r;
+    res.voxel_mm = nice_ceil(std::max(feature / 25.0, std::sqrt(area / 2e7)));
     std::ostringstream os;
-    os << "voxel: " << res.voxel_mm << " mm (default: tool radius / 25, at most ~2e7 voxels per layer of cut area; set --voxel)";
+    os << "voxel: " << res.voxel_mm << " mm (default: tool size / 25, at most ~2e7 voxels per layer of cut area; set --voxel)";
     res.defaults.notes.push_back(os.str());
   }
   // Sampled sweeps stay within a quarter voxel of the true ones.
@@ -282,11 +325,23 @@ SimResult simulate(const SimOptions& opt) {
       planner.monitor(m, pm, mon);
       // Piece by piece: a sampled rotary move's overall box can span the
       // whole stock while its pieces pass outside it.
-      const sweep::Sweep sw = planner.sweep(m, pm, res.tool);
-      if (!sw.bounds.overlaps(stock_reach)) return;
-      for (const auto& prim : sw.prims) {
-        const Aabb& b = sweep::bounds(prim);
-        if (b.overlaps(stock_reach)) roi.extend(b.intersected(stock_reach));
+      const tool::Tool& t = tool_for(m);
+      const sweep::Sweep sw = planner.sweep(m, pm, t);
+      if (sw.bounds.overlaps(stock_reach))
+        for (const auto& prim : sw.prims) {
+          const Aabb& b = sweep::bounds(prim);
+          if (b.overlaps(stock_reach)) roi.extend(b.intersected(stock_reach));
+        }
+      // The regions that must not touch: where they reach into the stock,
+      // the grid must hold the material they might meet.
+      const int n = (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() > 0 || m.is_arc() ? 16 : 1;
+      for (const auto& r : tool::contact_regions(t)) {
+        const Aabb lb = tool::shape_bounds(r.shape);
+        for (int i = 0; i <= n; ++i) {
+          const Pose q = planner.pose_at(m, pm, static_cast<double>(i) / n);
+          const Aabb b = sweep::world_box(lb, q.linear(), q.translation()).expanded(n > 1 ? 0.1 * lb.size().norm() : 0.0);
+          if (b.overlaps(stock_reach)) roi.extend(b.intersected(stock_reach));
+        }
       }
     });
     res.axis_limit_violations = mon.violations();
@@ -308,19 +363,29 @@ SimResult simulate(const SimOptions& opt) {
   }
   res.timing.stock_build_s = seconds_since(t_sim);
 
-  // Pass 2: cut.
+  // Pass 2: check the non-cutting regions, then cut.
   int done = 0;
   Planner planner(kin, iopt.initial, plopt);
   planner.set_file(opt.program);
+  res.contact_tolerance_mm = opt.contact_tolerance_mm ? *opt.contact_tolerance_mm
+                             : opt.job.contact_tolerance_mm ? *opt.job.contact_tolerance_mm
+                                                            : res.voxel_mm / 4;
+  const bool stop_at_contact = opt.stop_at_first_contact || opt.job.stop_at_first_contact.value_or(false);
+  InterferenceChecker checker(*res.stock, planner, res.contact_tolerance_mm, plopt.sweep_tolerance_mm);
+  struct StopAtContact {};
   try {
   stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
     const auto t0 = Clock::now();
+    const tool::Tool& t = tool_for(m);
     const PlannedMove pm = planner.plan(m);
-    const sweep::Sweep sw = planner.sweep(m, pm, res.tool);
+    const sweep::Sweep sw = planner.sweep(m, pm, t);
     const auto t1 = Clock::now();
+    const bool touched = checker.check(m, pm, t);
+    const auto t2 = Clock::now();
     res.stock->subtract(sw);
     res.timing.plan_sweep_s += std::chrono::duration<double>(t1 - t0).count();
-    res.timing.stock_update_s += seconds_since(t1);
+    res.timing.contact_check_s += std::chrono::duration<double>(t2 - t1).count();
+    res.timing.stock_update_s += seconds_since(t2);
     if (interrupted())
       throw InterruptedError(SourceLocation{opt.program, m.line, 0, m.text ? *m.text : std::string()},
                              interrupt_signal().load(), "interrupted while cutting line " + std::to_string(m.line));
@@ -328,13 +393,17 @@ SimResult simulate(const SimOptions& opt) {
     res.last_line_cut = m.line;
     if (opt.progress && (done % 64 == 0 || done == total_moves))
       opt.progress(static_cast<double>(done) / std::max(total_moves, 1), m.line);
+    if (touched && stop_at_contact) throw StopAtContact{};
   });
   } catch (const InterruptedError& e) {
     if (!opt.keep_partial) throw;
     res.interrupted = true;
     res.interrupt_message = e.what();
     res.interrupt_status = e.exit_status();
+  } catch (const StopAtContact&) {
+    res.stopped_at_contact = true;
   }
+  res.contacts = checker.contacts();
   res.max_laser_error_mm = planner.max_laser_error_mm();
   res.timing.simulate_s = seconds_since(t_sim);
   return res;

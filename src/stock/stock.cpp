@@ -1,4 +1,6 @@
 #include <cmath>
+#include <atomic>
+#include <mutex>
 #include <sstream>
 
 #include <openvdb/tools/Interpolation.h>
@@ -283,6 +285,80 @@ void Stock::subtract(const sweep::Sweep& sw) {
   });
   for (std::size_t i = 0; i < leaves.size(); ++i)
     if (all_air[i]) tree.addTile(1, leaves[i]->origin(), m.gamma, false);
+}
+
+Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3&)>& region,
+                       const std::function<double(const Vec3&)>& removed, double min_depth_mm) const {
+  const Impl& m = *impl_;
+  Overlap best;
+  const Aabb wb = bounds.intersected(m.box.expanded(m.h));
+  if (wb.empty()) return best;
+  CoordBBox bb(floor_coord((wb.min - m.origin) / m.h), ceil_coord((wb.max - m.origin) / m.h));
+  bb.intersect(m.roi_index);
+  if (bb.empty()) return best;
+  const double hd0 = std::sqrt(3.0) * 0.5 * (kLeafDim - 1) * m.h;
+  const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * m.h;
+  const auto& tree = m.grid->tree();
+  // Blocks the region can reach (its distance is a lower bound outside),
+  // skipping air tiles.
+  std::vector<Coord> blocks;
+  const Coord q0(bb.min().x() & ~(kNode1Dim - 1), bb.min().y() & ~(kNode1Dim - 1), bb.min().z() & ~(kNode1Dim - 1));
+  for (int x1 = q0.x(); x1 <= bb.max().x(); x1 += kNode1Dim)
+    for (int y1 = q0.y(); y1 <= bb.max().y(); y1 += kNode1Dim)
+      for (int z1 = q0.z(); z1 <= bb.max().z(); z1 += kNode1Dim) {
+        const Vec3 c1 = m.origin + m.h * (Vec3(x1, y1, z1).array() + 0.5 * (kNode1Dim - 1)).matrix();
+        if (region(c1) > hd1 - min_depth_mm) continue;
+        CoordBBox part = CoordBBox::createCube(Coord(x1, y1, z1), kNode1Dim);
+        part.intersect(bb);
+        if (part.empty()) continue;
+        const Coord p0(part.min().x() & ~(kLeafDim - 1), part.min().y() & ~(kLeafDim - 1), part.min().z() & ~(kLeafDim - 1));
+        for (int x = p0.x(); x <= part.max().x(); x += kLeafDim)
+          for (int y = p0.y(); y <= part.max().y(); y += kLeafDim)
+            for (int z = p0.z(); z <= part.max().z(); z += kLeafDim) {
+              const Coord o(x, y, z);
+              const Vec3 c0 = m.origin + m.h * (Vec3(x, y, z).array() + 0.5 * (kLeafDim - 1)).matrix();
+              if (region(c0) > hd0 - min_depth_mm) continue;
+              if (!tree.probeConstLeaf(o) && tree.getValue(o) > 0) continue;  // air tile
+              blocks.push_back(o);
+            }
+      }
+  if (blocks.empty()) return best;
+  std::mutex mu;
+  std::atomic<bool> saturated{false};
+  const double cap = m.gamma * (1 - 1e-6);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size()), [&](const auto& r) {
+    Overlap local;
+    for (std::size_t i = r.begin(); i != r.end() && !saturated.load(std::memory_order_relaxed); ++i) {
+      const Coord o = blocks[i];
+      const LeafT* leaf = tree.probeConstLeaf(o);
+      const float tile = leaf ? 0.0f : tree.getValue(o);
+      CoordBBox part = CoordBBox::createCube(o, kLeafDim);
+      part.intersect(bb);
+      for (int x = part.min().x(); x <= part.max().x(); ++x)
+        for (int y = part.min().y(); y <= part.max().y(); ++y)
+          for (int z = part.min().z(); z <= part.max().z(); ++z) {
+            const Coord c(x, y, z);
+            double mat = leaf ? static_cast<double>(leaf->getValue(c)) : static_cast<double>(tile);
+            if (mat >= -min_depth_mm) continue;
+            const Vec3 p = m.origin + m.h * Vec3(x, y, z);
+            const double rg = region(p);
+            if (rg >= -min_depth_mm) continue;
+            if (removed) mat = std::max(mat, -removed(p));
+            const double depth = std::min(-rg, -mat);
+            if (depth > min_depth_mm && depth > local.depth_mm) {
+              local.depth_mm = depth;
+              local.where = p;
+            }
+          }
+      if (local.depth_mm >= cap) saturated = true;
+    }
+    if (local.depth_mm > 0) {
+      std::lock_guard<std::mutex> lock(mu);
+      if (local.depth_mm > best.depth_mm) best = local;
+    }
+  });
+  best.at_least = best.depth_mm >= cap;
+  return best;
 }
 
 double Stock::initial_volume_mm3() const { return impl_->box.volume(); }

@@ -16,6 +16,9 @@ struct Job {
   std::string source;                ///< job file path, empty if none
   std::optional<Aabb> stock_box;     ///< [stock] box = [xmin,ymin,zmin,xmax,ymax,zmax], mm
   std::optional<tool::Tool> tool;    ///< [tool] spec = "ball:d=1"
+  std::optional<std::string> tool_library;  ///< [tool] library = "tools.toml" or "tools.tbl" (beside the job)
+  std::optional<double> contact_tolerance_mm;  ///< [simulation] contact_tolerance_mm
+  std::optional<bool> stop_at_first_contact;   ///< [simulation] stop_at_first_contact
   std::optional<double> voxel_mm;    ///< [simulation] voxel_mm
   std::optional<Vec3> start_mm;      ///< [simulation] start = [x,y,z], tool tip at program start
   std::optional<double> memory_limit_mb;  ///< [simulation] memory_limit_mb

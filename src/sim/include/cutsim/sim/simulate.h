@@ -15,6 +15,7 @@
 #include "cutsim/machine/axis_monitor.h"
 #include "cutsim/machine/machine.h"
 #include "cutsim/motion/interpreter.h"
+#include "cutsim/sim/interference.h"
 #include "cutsim/stock/stock.h"
 #include "cutsim/tool/tool.h"
 
@@ -30,7 +31,10 @@ struct SimOptions {
   std::string program;          ///< NC program path
   io::Job job;                  ///< settings from the job file, overridden below
   std::optional<Aabb> stock_box;     ///< --stock-box
-  std::optional<tool::Tool> tool;    ///< --tool
+  std::optional<tool::Tool> tool;    ///< --tool (with a library: the tool before the first tool change)
+  std::optional<std::string> tools_file;        ///< --tools FILE (.toml or LinuxCNC .tbl)
+  std::optional<double> contact_tolerance_mm;   ///< --contact-tolerance
+  bool stop_at_first_contact = false;           ///< --stop-at-contact
   std::optional<double> voxel_mm;    ///< --voxel
   std::optional<gcode::Dialect> dialect;  ///< --dialect
   bool block_delete = false;         ///< --block-delete
@@ -60,6 +64,7 @@ struct Timing {
   double stock_build_s = 0;   ///< part of simulate_s: filling the grid
   double plan_sweep_s = 0;    ///< part of simulate_s: kinematics, planning and sweep construction
   double stock_update_s = 0;  ///< part of simulate_s: subtracting sweeps from the grid
+  double contact_check_s = 0; ///< part of simulate_s: testing the non-cutting regions
 };
 
 struct SimResult {
@@ -86,6 +91,11 @@ struct SimResult {
   std::string interrupt_message;
   int interrupt_status = 0;                     ///< exit status the CLI returns
   std::optional<compare::CompareResult> comparison;  ///< with a target
+  std::string tool_library;                     ///< library file, if any
+  std::vector<tool::Tool> tools_used;           ///< in order of first use
+  std::vector<Contact> contacts;                ///< non-cutting regions in the material
+  double contact_tolerance_mm = 0;              ///< contacts shallower than this are not recorded
+  bool stopped_at_contact = false;              ///< stop_at_first_contact ended the run
 };
 
 /// The target mesh from a file, placed in the workpiece frame (scale, then

@@ -30,6 +30,13 @@ struct VoxelBlock {
   float values[512];   ///< level-set values, index (x * 8 + y) * 8 + z, when not uniform
 };
 
+/// How deep a region reaches into the material (see Stock::overlap).
+struct Overlap {
+  double depth_mm = 0;        ///< deepest overlap found (0: none above the threshold)
+  Vec3 where = Vec3::Zero();  ///< voxel centre of the deepest overlap, workpiece frame
+  bool at_least = false;      ///< the depth reached the band's half width: the true depth is at least this
+};
+
 struct StockStats {
   std::size_t leaf_nodes = 0;
   std::size_t active_voxels = 0;
@@ -69,6 +76,15 @@ public:
   /// Calls `fn` for every block of the region of interest, in parallel;
   /// `fn` must be safe to call from several threads at once.
   void for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn) const;
+  /// The deepest overlap of a region with the material at the voxel centres
+  /// inside `bounds`: depth(p) = min(-region(p), -material(p)), where the
+  /// material is the stock less what `removed` (a signed distance, may be
+  /// empty) covers. `region` must be exact or a lower bound outside (it
+  /// culls blocks). Only depths above `min_depth_mm` count. The stock's
+  /// values are clamped to the band, so depths stop at its half width.
+  Overlap overlap(const Aabb& bounds, const std::function<double(const Vec3&)>& region,
+                  const std::function<double(const Vec3&)>& removed, double min_depth_mm) const;
+
   /// Level-set value at a world point (trilinear), mm.
   double sample(const Vec3& p) const;
 

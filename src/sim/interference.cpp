@@ -1,0 +1,123 @@
+#include "cutsim/sim/interference.h"
+
+#include <cmath>
+#include <cstdio>
+
+#include "cutsim/sweep/sweep.h"
+
+namespace cutsim::sim {
+
+InterferenceChecker::InterferenceChecker(const stock::Stock& stock, const Planner& planner, double tolerance_mm,
+                                         double sweep_tolerance_mm)
+    : stock_(stock), planner_(planner), tol_(tolerance_mm), sweep_tol_(sweep_tolerance_mm) {}
+
+double InterferenceChecker::pose_spacing(const tool::Tool& t, double voxel_mm) {
+  double s;
+  if (!t.rotating()) s = 0.5 * std::min(t.body_length_mm, t.edge_height_mm);
+  else if (t.kind == tool::ToolKind::flycutter) s = t.corner_radius_mm;
+  else {
+    s = 0.5 * std::min(t.diameter_mm, t.shank_diameter_mm);
+    if (t.neck_length_mm > 0) s = std::min(s, 0.5 * std::min(t.neck_diameter_mm, t.neck_length_mm));
+  }
+  return std::max(s, 2 * voxel_mm);
+}
+
+bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool) {
+  const bool rapid = m.kind == motion::MotionKind::rapid;
+  std::vector<tool::Region> regions = tool::contact_regions(tool);
+  const tool::Shape cut = tool::cutting_shape(tool);
+  if (rapid && !std::holds_alternative<tool::EdgeProfile>(cut)) regions.push_back({"cutter", cut});
+  if (regions.empty()) return false;
+
+  // Poses: evenly spaced along the tip's path (sampled for multi-axis moves).
+  const Pose p0 = planner_.pose_at(m, pm, 0.0);
+  double len = 0;
+  {
+    // Tip travel plus how far the tool's far end swings with the axis.
+    Vec3 prev = p0.translation(), prev_axis = p0.linear().col(2);
+    const double far = tool::shape_bounds(tool::cutting_shape(tool)).max.norm();
+    for (int i = 1; i <= 16; ++i) {
+      const Pose q = planner_.pose_at(m, pm, i / 16.0);
+      const Vec3 axis = q.linear().col(2);
+      len += (q.translation() - prev).norm() + far * std::acos(std::clamp(axis.dot(prev_axis), -1.0, 1.0));
+      prev = q.translation();
+      prev_axis = axis;
+    }
+  }
+  const int n = std::clamp(static_cast<int>(std::ceil(len / pose_spacing(tool, stock_.voxel_mm()))), 1, 100000);
+  const bool straight = !m.is_arc() && (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
+  const Aabb reach = stock_.roi().intersected(stock_.box().expanded(stock_.voxel_mm()));
+
+  bool touched = false;
+  for (int k = 1; k <= n; ++k) {
+    const double s = static_cast<double>(k) / n;
+    const Pose pose = planner_.pose_at(m, pm, s);
+    const Eigen::Matrix3d Rt = pose.linear().transpose();
+    const Vec3 tip = pose.translation();
+    ++pose_index_;
+    // Skip poses whose regions all miss the material's reach.
+    bool any = false;
+    std::vector<Aabb> boxes;
+    for (const auto& r : regions) {
+      boxes.push_back(sweep::world_box(tool::shape_bounds(r.shape), pose.linear(), tip));
+      any |= boxes.back().overlaps(reach);
+    }
+    if (!any) continue;
+    // What the cutting part removed from the move's start to this pose.
+    sweep::Sweep so_far;
+    if (!rapid) {
+      if (straight) so_far = sweep::sweep_line(p0.translation(), tip, p0.linear(), cut);
+      else
+        so_far = sweep::sweep_poses([&](double u) { return planner_.pose_at(m, pm, u * s); }, cut, sweep_tol_, 4);
+    }
+    std::function<double(const Vec3&)> removed;
+    if (!so_far.prims.empty()) removed = [&so_far](const Vec3& x) { return so_far.distance(x); };
+    for (std::size_t i = 0; i < regions.size(); ++i) {
+      if (!boxes[i].overlaps(reach)) continue;
+      const tool::Shape& shape = regions[i].shape;
+      const stock::Overlap ov = stock_.overlap(
+          boxes[i], [&](const Vec3& x) { return tool::shape_distance(shape, Rt * (x - tip)); }, removed, tol_);
+      if (ov.depth_mm <= tol_) continue;
+      touched = true;
+      // Merge with the record of this region on this line at the pose before.
+      Contact* rec = nullptr;
+      for (auto it = contacts_.rbegin(); it != contacts_.rend() && it - contacts_.rbegin() < 8; ++it)
+        if (it->line == m.line && it->region == regions[i].name && it->rapid == rapid &&
+            it->last_pose == pose_index_ - 1) {
+          rec = &*it;
+          break;
+        }
+      if (!rec) {
+        Contact c;
+        c.line = m.line;
+        c.text = m.text ? *m.text : std::string();
+        c.region = regions[i].name;
+        c.rapid = rapid;
+        contacts_.push_back(c);
+        rec = &contacts_.back();
+      }
+      rec->poses += 1;
+      rec->last_pose = pose_index_;
+      if (ov.depth_mm > rec->depth_mm) {
+        rec->depth_mm = ov.depth_mm;
+        rec->where = ov.where;
+        rec->at_least = ov.at_least;
+      }
+    }
+  }
+  return touched;
+}
+
+std::string format_contact(const Contact& c, const std::string& program) {
+  const double um = c.depth_mm * 1000;
+  char depth[64];
+  std::snprintf(depth, sizeof depth, um < 0.1 ? "%.2f" : um < 10 ? "%.1f" : "%.0f", um);
+  char where[128];
+  std::snprintf(where, sizeof where, "(%.4f, %.4f, %.4f)", c.where.x(), c.where.y(), c.where.z());
+  std::string s = program + ":" + std::to_string(c.line) + ": ";
+  s += c.rapid ? "rapid contact (" + c.region + ")" : c.region + " contact";
+  s += std::string(" ") + (c.at_least ? "at least " : "") + depth + " um deep at " + where + ": " + c.text;
+  return s;
+}
+
+}  // namespace cutsim::sim
