@@ -1,0 +1,325 @@
+// Diamond tools, tool libraries and contacts of the non-cutting regions,
+// checked against the geometry of each case.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+#include <sstream>
+
+#include "cutsim/core/error.h"
+#include "cutsim/io/tool_library.h"
+#include "cutsim/sim/interference.h"
+#include "helpers.h"
+
+namespace cutsim::test {
+namespace {
+
+sim::SimResult run_with(const TempDir& dir, const std::string& program, const std::string& tool_spec, const Aabb& stock,
+                        double voxel) {
+  return run_program(dir, program, tool_spec, stock, voxel);
+}
+
+std::set<int> contact_lines(const sim::SimResult& r) {
+  std::set<int> s;
+  for (const auto& c : r.contacts) s.insert(c.line);
+  return s;
+}
+
+// Two rows, each: enter horizontally, climb at `deg` in the cutting
+// direction (+X) for 1.5 mm, then fall at `deg` and leave the stock.
+std::string slope_program(double deg) {
+  const double t = std::tan(deg * kPi / 180);
+  std::ostringstream os;
+  os.precision(10);
+  for (double y : {-0.6, 0.6}) {
+    os << "G0 X-1 Y" << y << " Z1\n"
+       << "G0 Z-0.3\n"
+       << "G1 X0.5 F200\n"
+       << "G1 X2 Z" << -0.3 + 1.5 * t << "\n"
+       << "G1 X5.5 Z" << -0.3 + 1.5 * t - 3.5 * t << "\n"
+       << "G0 Z1\n";
+  }
+  os << "M30\n";
+  return os.str();
+}
+
+}  // namespace
+
+// Where the path falls in the cutting direction, the surface the nose has
+// just cut lies above the path behind the edge, by L tan(slope) at L behind;
+// the clearance face rises only L tan(clearance). So the flank rubs exactly
+// where the cut surface climbs behind the tool (the issue's "cutting up a
+// slope": up the slope towards the tool's back) more steeply than the
+// clearance angle, and never where the path climbs in the cutting direction.
+TEST(Interference, RoundNoseFlankTouchesOnlyWhereTheSlopeBeatsTheClearance) {
+  TempDir dir;
+  const Aabb stock{Vec3(0, -1.5, -1), Vec3(4, 1.5, 0)};
+  const std::string tool = "nose:r=0.5,clearance=5";
+  const auto gentle = run_with(dir, slope_program(3), tool, stock, 0.02);
+  EXPECT_TRUE(gentle.contacts.empty()) << sim::format_contact(gentle.contacts.front(), "prog.nc");
+
+  const auto steep = run_with(dir, slope_program(8), tool, stock, 0.02);
+  // Lines 5 and 11 fall at 8 deg; 4 and 10 climb; the rest are level or in air.
+  EXPECT_EQ(contact_lines(steep), (std::set<int>{5, 11}));
+  // One record per line: consecutive poses merge.
+  ASSERT_EQ(steep.contacts.size(), 2u);
+  // The overlap can be no thicker than the gap at the body's back,
+  // L (tan 8 - tan 5) cos 5 with L = 1 mm (the body length): 52.9 um.
+  const double bound = 1.0 * (std::tan(8 * kPi / 180) - std::tan(5 * kPi / 180)) * std::cos(5 * kPi / 180);
+  for (const auto& c : steep.contacts) {
+    EXPECT_EQ(c.region, "clearance-face");
+    EXPECT_FALSE(c.rapid);
+    EXPECT_GT(c.poses, 1);
+    EXPECT_GT(c.depth_mm, 0.01);
+    EXPECT_LE(c.depth_mm, bound + 0.02);  // + one voxel
+    EXPECT_GT(c.where.x(), 2.0);           // on the falling part
+    EXPECT_LE(c.where.x(), 4.0 + 0.02);
+  }
+}
+
+// A 90 deg V tool planing a raster at 8 um pick feed, 10 um deep. Adjacent
+// V grooves meet at p / (2 tan 45) = 4 um above their bottoms.
+// The clearance faces do not touch the cusps here: on a level raster each
+// flank lies behind its edge inside the groove that edge has just cut,
+// shrunk by L tan(7 deg) at L behind, and a cusp is the meeting of this
+// groove's wall (cut by the edge) with the last one's, so it is outside
+// the flank. (They touch where the path falls faster than the clearance
+// allows: see the slope test and the snowflake case.)
+TEST(Interference, VToolRasterLeavesClosedFormCuspsAndNoFlankContact) {
+  TempDir dir;
+  std::ostringstream os;
+  const double pick = 0.008, depth = 0.010;
+  for (int j = 0; j < 10; ++j)
+    os << "G0 X-0.05 Y" << j * pick << " Z0.01\nG1 Z" << -depth << " F50\nG1 X0.15\nG0 Z0.01\n";
+  os << "M30\n";
+  const double h = 0.0005;
+  const auto r = run_with(dir, os.str(), "vtool:angle=90,clearance=7", Aabb{Vec3(0, -0.02, -0.05), Vec3(0.1, 0.09, 0)}, h);
+  EXPECT_TRUE(r.contacts.empty()) << sim::format_contact(r.contacts.front(), "prog.nc");
+  double bottoms = 0, tops = 0;
+  int nb = 0, nt = 0;
+  for (int j = 1; j <= 8; ++j) {
+    // Lowest point near groove j, highest near the cusp after it.
+    double lo = 1, hi = -1;
+    for (double y = j * pick - 0.002; y <= j * pick + 0.002; y += h / 4)
+      lo = std::min(lo, r.stock->surface_height(0.05, y, 0.005));
+    for (double y = (j + 0.5) * pick - 0.002; y <= (j + 0.5) * pick + 0.002; y += h / 4)
+      hi = std::max(hi, r.stock->surface_height(0.05, y, 0.005));
+    EXPECT_NEAR(lo, -depth, 0.6 * h) << "groove " << j;
+    bottoms += lo;
+    ++nb;
+    if (j < 8) {
+      EXPECT_NEAR(hi, -depth + pick / 2, 0.8 * h) << "cusp after groove " << j;
+      tops += hi;
+      ++nt;
+    }
+  }
+  const double cusp = tops / nt - bottoms / nb;
+  EXPECT_NEAR(cusp, pick / 2 / std::tan(kPi / 4), 0.8 * h);
+}
+
+TEST(Interference, ShankContactWhereABallMillPlungesPastItsFlutes) {
+  TempDir dir;
+  // Flutes 1 mm long, a 3 mm shank above them: plunging 1.5 mm buries the
+  // shank's lower end 0.5 mm in the material.
+  const std::string prog = "G0 X0 Y0 Z1\nG1 Z-1.5 F100\nM30\n";
+  const auto r = run_with(dir, prog, "ball:d=1,l=1,shank_d=3", Aabb{Vec3(-3, -3, -3), Vec3(3, 3, 0)}, 0.02);
+  ASSERT_EQ(r.contacts.size(), 1u);
+  EXPECT_EQ(r.contacts[0].line, 2);
+  EXPECT_EQ(r.contacts[0].region, "shank");
+  EXPECT_EQ(r.contacts[0].text, "G1 Z-1.5 F100");
+  // The shank's end sits at z = -0.5 at the end of the move.
+  EXPECT_LE(r.contacts[0].where.z(), 0.0);
+  EXPECT_GE(r.contacts[0].where.z(), -0.5 - 0.02);
+
+  // The same plunge within the flute length touches nothing.
+  const auto ok = run_with(dir, "G0 X0 Y0 Z1\nG1 Z-0.9 F100\nM30\n", "ball:d=1,l=1,shank_d=3",
+                           Aabb{Vec3(-3, -3, -3), Vec3(3, 3, 0)}, 0.02);
+  EXPECT_TRUE(ok.contacts.empty());
+}
+
+TEST(Interference, RapidThroughTheStockIsFlaggedAndARapidAboveIsNot) {
+  TempDir dir;
+  const std::string prog =
+      "G0 X-5 Y0 Z1\n"   // 1: in the air
+      "G0 X5\n"          // 2: above the stock
+      "G0 Z-0.5\n"       // 3: beside it
+      "G0 X-5\n"         // 4: through it
+      "G0 Z1\n"          // 5
+      "M30\n";
+  const auto r = run_with(dir, prog, "ball:d=1", Aabb{Vec3(-2, -2, -1), Vec3(2, 2, 0)}, 0.02);
+  ASSERT_EQ(r.contacts.size(), 1u);
+  EXPECT_EQ(r.contacts[0].line, 4);
+  EXPECT_TRUE(r.contacts[0].rapid);
+  EXPECT_EQ(r.contacts[0].region, "cutter");
+  EXPECT_TRUE(r.contacts[0].at_least);  // 0.5 mm deep: past the band
+  EXPECT_EQ(sim::format_contact(r.contacts[0], "prog.nc").rfind("prog.nc:4: rapid contact (cutter) at least 60 um deep at (", 0), 0u);
+}
+
+// A fly-cutter (spindle along Y) fed along X leaves one swing-radius arc
+// per revolution: the face is flat to within the scallop
+// R - sqrt(R^2 - f^2/4) (R = 5 mm, f = 1 mm/rev: 25.06 um).
+TEST(Interference, FlyCutterFaceIsFlatToTheFeedPerRevolutionScallop) {
+  TempDir dir;
+  const std::string prog = "G0 X-6 Y0 Z0.5\nG0 Z-0.05\nS1000 M3\nG1 X10 F1000\nG0 Z1\nM30\n";
+  const double h = 0.002;
+  const auto r = run_with(dir, prog, "flycutter:swing=5,r=1", Aabb{Vec3(0, -0.3, -0.5), Vec3(2, 0.3, 0)}, h);
+  EXPECT_TRUE(r.contacts.empty());
+  const double R = 5, f = 1;
+  const double scallop = R - std::sqrt(R * R - f * f / 4);
+  double lo = 1, hi = -1;
+  for (double x = 0.2; x <= 1.8; x += 0.005) {
+    const double z = r.stock->surface_height(x, 0, 0.01);
+    lo = std::min(lo, z);
+    hi = std::max(hi, z);
+  }
+  EXPECT_NEAR(lo, -0.05, h / 2);
+  EXPECT_NEAR(hi - lo, scallop, h);
+  // Marks one feed per revolution apart, cusps halfway (the phase follows
+  // the time line from the program's start, rapids included).
+  double x_lo = 0.2;
+  for (double x = 0.2; x <= 1.0; x += 0.001)
+    if (r.stock->surface_height(x, 0, 0.01) < r.stock->surface_height(x_lo, 0, 0.01)) x_lo = x;
+  EXPECT_NEAR(r.stock->surface_height(x_lo + f, 0, 0.01), lo, h / 2);
+  EXPECT_NEAR(r.stock->surface_height(x_lo + f / 2, 0, 0.01), lo + scallop, h);
+}
+
+TEST(Interference, StopAtFirstContactEndsTheRunThere) {
+  TempDir dir;
+  sim::SimOptions o;
+  o.program = dir.write("prog.nc", "G0 X-5 Y0 Z-0.5\nG0 X5\nG0 Y1\nG0 X-5\nM30\n");
+  o.tool = tool::parse_tool_spec("ball:d=1");
+  o.stock_box = Aabb{Vec3(-2, -2, -1), Vec3(2, 2, 0)};
+  o.voxel_mm = 0.02;
+  o.stop_at_first_contact = true;
+  const auto r = sim::simulate(o);
+  EXPECT_TRUE(r.stopped_at_contact);
+  ASSERT_EQ(r.contacts.size(), 1u);
+  EXPECT_EQ(r.contacts[0].line, 2);
+  EXPECT_EQ(r.last_line_cut, 2);
+}
+
+TEST(ToolSpec, EveryKindParsesWithItsDefaults) {
+  const auto v = tool::parse_tool_spec("vtool:angle=90,clearance=7");
+  EXPECT_EQ(v.kind, tool::ToolKind::vtool);
+  EXPECT_DOUBLE_EQ(v.included_angle_deg, 90);
+  EXPECT_DOUBLE_EQ(v.clearance_angle_deg, 7);
+  EXPECT_DOUBLE_EQ(v.corner_radius_mm, 0);
+  const auto n = tool::parse_tool_spec("nose:r=0.9789,clearance=10");
+  EXPECT_DOUBLE_EQ(n.corner_radius_mm, 0.9789);
+  EXPECT_DOUBLE_EQ(n.rake_angle_deg, 0);
+  const auto b = tool::parse_tool_spec("bull:d=2,r=0.2");
+  EXPECT_DOUBLE_EQ(b.corner_radius_mm, 0.2);
+  EXPECT_DOUBLE_EQ(b.shank_diameter_mm, 2);
+  const auto f = tool::parse_tool_spec("flycutter:swing=18,r=2");
+  EXPECT_DOUBLE_EQ(f.swing_radius_mm, 18);
+  EXPECT_DOUBLE_EQ(f.radius(), 18);
+  for (const char* bad : {"vtool:r=0.1", "nose:clearance=5", "flycutter:swing=1,r=2", "nose:r=1,angle=180",
+                          "ball:d=1,neck_d=0.5", "drill:d=3", "ball:d=1,holder_d=5"})
+    EXPECT_THROW(tool::parse_tool_spec(bad), ConfigError) << bad;
+}
+
+// The V tool's regions, exactly: the edge profile's width at height z is
+// 2 z tan 45; the flank at L behind the rake face is shrunk by L tan 7.
+TEST(ToolSpec, VToolRegionsHaveTheirClosedFormGeometry) {
+  const auto t = tool::parse_tool_spec("vtool:angle=90,clearance=7");
+  const tool::Shape edge = tool::cutting_shape(t);
+  // On the edge line at height 0.1: y = 0.1.
+  EXPECT_NEAR(tool::shape_distance(edge, Vec3(0, 0.1, 0.1)), 0, 1e-12);
+  EXPECT_NEAR(tool::shape_distance(edge, Vec3(0.003, 0.05, 0.1)), 0.003, 1e-12);
+  const auto regions = tool::contact_regions(t);
+  ASSERT_EQ(regions.size(), 1u);
+  EXPECT_EQ(regions[0].name, "clearance-face");
+  // 0.2 behind, at height 0.1: the flank's edge is at y = 0.1 - 0.2 tan7 / cos45.
+  const double y = 0.1 - 0.2 * std::tan(7 * kPi / 180) / std::cos(kPi / 4);
+  EXPECT_NEAR(tool::shape_distance(regions[0].shape, Vec3(-0.2, y, 0.1)), 0, 1e-12);
+  EXPECT_LT(tool::shape_distance(regions[0].shape, Vec3(-0.2, y - 0.001, 0.1)), 0);
+  EXPECT_GT(tool::shape_distance(regions[0].shape, Vec3(-0.2, y + 0.001, 0.1)), 0);
+  // A ball mill: shank from the flute length up.
+  const auto b = tool::parse_tool_spec("ball:d=1,l=1,shank_d=3,shank_l=20");
+  const auto br = tool::contact_regions(b);
+  ASSERT_EQ(br.size(), 1u);
+  EXPECT_NEAR(tool::shape_distance(br[0].shape, Vec3(0, 0, 0.9)), 0.1, 1e-12);
+  EXPECT_NEAR(tool::shape_distance(br[0].shape, Vec3(1.6, 0, 5)), 0.1, 1e-12);
+}
+
+TEST(ToolLibrary, TomlToolsByNumber) {
+  const auto lib = io::parse_tool_library_toml(
+      "[[tool]]\nnumber = 1\nkind = \"ball\"\ndiameter = 1.0\nflute_length = 1.5\nshank_diameter = 4\n"
+      "[[tool]]\nnumber = 5\nspec = \"vtool:angle=90,clearance=7\"\nname = \"snowflake V\"\n"
+      "[[tool]]\nnumber = 7\nkind = \"nose\"\nnose_radius = 0.9789\nclearance_angle = 10\n",
+      "lib.toml");
+  ASSERT_EQ(lib.tools.size(), 3u);
+  EXPECT_DOUBLE_EQ(lib.find(1)->shank_diameter_mm, 4);
+  EXPECT_DOUBLE_EQ(lib.find(1)->flute_length_mm, 1.5);
+  EXPECT_EQ(lib.find(5)->name, "snowflake V");
+  EXPECT_EQ(lib.find(7)->kind, tool::ToolKind::nose);
+  EXPECT_EQ(lib.find(2), nullptr);
+  try {
+    io::parse_tool_library_toml("[[tool]]\nnumber = 1\nkind = \"ball\"\ndiameter = 1\ndiamter = 2\n", "lib.toml");
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.where().line, 5);
+    EXPECT_EQ(e.where().column, 1);
+  }
+  EXPECT_THROW(io::parse_tool_library_toml("[[tool]]\nnumber = 1\nkind = \"ball\"\ndiameter = -1\n", "l"), ConfigError);
+  EXPECT_THROW(io::parse_tool_library_toml("[[tool]]\nnumber = 1\nspec = \"ball:d=1\"\n[[tool]]\nnumber = 1\nspec = \"flat:d=1\"\n", "l"),
+               ConfigError);
+}
+
+TEST(ToolLibrary, LinuxCncTableImportsEndMills) {
+  std::istringstream in(
+      ";LinuxCNC tool table\n"
+      "T1 P1 D6.0 Z+12.5 ;6 mm flat end mill\n"
+      "T2 P2 X0 D1.0 Z0 ;ball end mill l=2 shank_d=4\n"
+      "t3 p3 d2 ;bull r=0.2\n");
+  const auto lib = io::parse_linuxcnc_tbl(in, "t.tbl");
+  ASSERT_EQ(lib.tools.size(), 3u);
+  EXPECT_EQ(lib.find(1)->kind, tool::ToolKind::flat);
+  EXPECT_DOUBLE_EQ(lib.find(1)->diameter_mm, 6);
+  EXPECT_EQ(lib.find(2)->kind, tool::ToolKind::ball);
+  EXPECT_DOUBLE_EQ(lib.find(2)->flute_length_mm, 2);
+  EXPECT_DOUBLE_EQ(lib.find(2)->shank_diameter_mm, 4);
+  EXPECT_EQ(lib.find(3)->kind, tool::ToolKind::bull);
+  EXPECT_DOUBLE_EQ(lib.find(3)->corner_radius_mm, 0.2);
+  struct Bad { const char* text; int line, col; };
+  for (const Bad& b : {Bad{"T1 D6\nT2 D1x\n", 2, 5}, Bad{"T1 P1 Z0\n", 1, 9}, Bad{"T1 D1\nT1 D2\n", 2, 1},
+                       Bad{"T1 D1 K5\n", 1, 7}, Bad{"P1 D1\n", 1, 1}, Bad{"T1 D1 ;bull r=\n", 1, 13}}) {
+    std::istringstream s(b.text);
+    try {
+      io::parse_linuxcnc_tbl(s, "t.tbl");
+      ADD_FAILURE() << b.text;
+    } catch (const ParseError& e) {
+      EXPECT_EQ(e.where().line, b.line) << b.text;
+      EXPECT_EQ(e.where().column, b.col) << b.text;
+    }
+  }
+}
+
+TEST(ToolLibrary, ProgramPicksToolsByTNumberAndNamesAMissingOne) {
+  TempDir dir;
+  const std::string lib = dir.write("tools.toml",
+                                    "[[tool]]\nnumber = 1\nspec = \"flat:d=2\"\n[[tool]]\nnumber = 2\nspec = \"ball:d=0.5\"\n");
+  sim::SimOptions o;
+  o.program = dir.write("prog.nc", "T1 M6\nG0 X-2 Y0 Z-0.1\nG1 X2 F100\nT2 M6\nG0 Y1\nG1 X-2\nT9 M6\nG1 Y2\nM30\n");
+  o.tools_file = lib;
+  o.stock_box = Aabb{Vec3(-1, -1, -1), Vec3(1, 3, 0)};
+  o.voxel_mm = 0.02;
+  try {
+    sim::simulate(o);
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.where().line, 8);
+    EXPECT_NE(e.message().find("T9 is not in the tool library"), std::string::npos) << e.message();
+  }
+  o.program = dir.write("prog2.nc", "T1 M6\nG0 X-2 Y0 Z-0.1\nG1 X2 F100\nT2 M6\nG0 Y2\nG1 X-2\nM30\n");
+  const auto r = sim::simulate(o);
+  ASSERT_EQ(r.tools_used.size(), 2u);
+  EXPECT_EQ(r.tools_used[0].number, 1);
+  EXPECT_EQ(r.tools_used[1].number, 2);
+  // The 2 mm flat slot is 0.1 deep and 2 wide over 2 mm of stock; the
+  // 0.5 mm ball's slot 0.1 deep has the circular segment's cross-section.
+  const double seg = 0.25 * 0.25 * std::acos(0.15 / 0.25) - 0.15 * std::sqrt(0.25 * 0.25 - 0.15 * 0.15);
+  EXPECT_NEAR(r.stock->removed_volume_mm3(), 2 * 2 * 0.1 + 2 * seg, 0.01);
+}
+
+}  // namespace cutsim::test
