@@ -178,3 +178,41 @@ TEST(Cli, TwoRunsGiveBitIdenticalReportsAndMeshes) {
 
 }  // namespace
 }  // namespace cutsim::test
+
+namespace cutsim::test {
+
+// A contact is a finding, not a failure: outputs are written, each contact
+// is printed as file:line with the NC text, the report lists them, and the
+// exit code is 1. A clean run exits 0.
+TEST(Cli, ContactsPrintByLineAndExitOne) {
+  TempDir dir;
+  const std::string tbl = dir.write("tools.tbl", "T3 P3 D1.0 Z0 ;ball end mill l=1 shank_d=3\n");
+  const std::string prog = dir.write("plunge.nc", "T3 M6\nG0 X0 Y0 Z1\nG1 Z-1.5 F100\nG0 Z1\nM30\n");
+  const std::string outdir = dir.file("out");
+  std::string out, err;
+  const int code = run_cli("run " + prog + " --tools " + tbl + " --stock-box -3,-3,-3,3,3,0 --voxel 0.02 -o " + outdir,
+                           &out, &err);
+  EXPECT_EQ(code, 1) << out << err;
+  EXPECT_NE(out.find(prog + ":3: shank contact at least 60 um deep at ("), std::string::npos) << out;
+  EXPECT_NE(out.find("): G1 Z-1.5 F100\n"), std::string::npos) << out;
+  // Pulling the buried shank out with a rapid touches too.
+  EXPECT_NE(out.find(prog + ":4: rapid contact (shank)"), std::string::npos) << out;
+  const auto report = nlohmann::json::parse(slurp(outdir + "/plunge.report.json"));
+  ASSERT_EQ(report["contacts"].size(), 2u);
+  EXPECT_EQ(report["contacts"][0]["line"], 3);
+  EXPECT_EQ(report["contacts"][0]["region"], "shank");
+  EXPECT_EQ(report["contacts"][1]["rapid"], true);
+  EXPECT_EQ(report["tools_used"][0]["number"], 3);
+  EXPECT_TRUE(std::filesystem::exists(outdir + "/plunge.glb"));
+
+  // Within the flutes: clean, exit 0.
+  const std::string ok = dir.write("ok.nc", "T3 M6\nG0 X0 Y0 Z1\nG1 Z-0.8 F100\nG0 Z1\nM30\n");
+  EXPECT_EQ(run_cli("run " + ok + " --tools " + tbl + " --stock-box -3,-3,-3,3,3,0 --voxel 0.02 -o " + outdir, &out, &err), 0)
+      << out << err;
+  // An unknown T number is a configuration error at its line.
+  const std::string bad = dir.write("bad.nc", "T4 M6\nG1 X1 F100\nM30\n");
+  EXPECT_EQ(run_cli("run " + bad + " --tools " + tbl + " --stock-box -3,-3,-3,3,3,0 -o " + outdir, &out, &err), 78);
+  EXPECT_NE(err.find(bad + ":2:1: error: tool T4 is not in the tool library"), std::string::npos) << err;
+}
+
+}  // namespace cutsim::test

@@ -48,9 +48,15 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
   const bool straight = !m.is_arc() && (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
   const Aabb reach = stock_.roi().intersected(stock_.box().expanded(stock_.voxel_mm()));
 
+  // Envelopes (neck, shank, holder, a rapid's cutter) are tested swept
+  // from the pose before, exactly, so nothing hides between poses; the
+  // flank body, at each pose (poses at most half its length apart).
+  auto swept = [](const tool::Shape& sh) { return !std::holds_alternative<tool::FlankBody>(sh); };
   bool touched = false;
+  Pose prev = p0;
   for (int k = 1; k <= n; ++k) {
     const double s = static_cast<double>(k) / n;
+    const double s_prev = static_cast<double>(k - 1) / n;
     const Pose pose = planner_.pose_at(m, pm, s);
     const Eigen::Matrix3d Rt = pose.linear().transpose();
     const Vec3 tip = pose.translation();
@@ -58,10 +64,23 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     // Skip poses whose regions all miss the material's reach.
     bool any = false;
     std::vector<Aabb> boxes;
-    for (const auto& r : regions) {
-      boxes.push_back(sweep::world_box(tool::shape_bounds(r.shape), pose.linear(), tip));
-      any |= boxes.back().overlaps(reach);
+    std::vector<sweep::Sweep> sweeps(regions.size());
+    for (std::size_t i = 0; i < regions.size(); ++i) {
+      Aabb b = sweep::world_box(tool::shape_bounds(regions[i].shape), pose.linear(), tip);
+      if (swept(regions[i].shape)) {
+        b.extend(sweep::world_box(tool::shape_bounds(regions[i].shape), prev.linear(), prev.translation()));
+        if (b.expanded(0.1 * b.size().norm()).overlaps(reach)) {
+          sweeps[i] = straight ? sweep::sweep_line(prev.translation(), tip, pose.linear(), regions[i].shape)
+                               : sweep::sweep_poses(
+                                     [&](double u) { return planner_.pose_at(m, pm, s_prev + u * (s - s_prev)); },
+                                     regions[i].shape, sweep_tol_, 1);
+          b = sweeps[i].bounds;
+        }
+      }
+      boxes.push_back(b);
+      any |= b.overlaps(reach);
     }
+    prev = pose;
     if (!any) continue;
     // What the cutting part removed from the move's start to this pose.
     sweep::Sweep so_far;
@@ -75,8 +94,12 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     for (std::size_t i = 0; i < regions.size(); ++i) {
       if (!boxes[i].overlaps(reach)) continue;
       const tool::Shape& shape = regions[i].shape;
-      const stock::Overlap ov = stock_.overlap(
-          boxes[i], [&](const Vec3& x) { return tool::shape_distance(shape, Rt * (x - tip)); }, removed, tol_);
+      const sweep::Sweep& sw = sweeps[i];
+      const stock::Overlap ov =
+          sw.prims.empty()
+              ? stock_.overlap(boxes[i], [&](const Vec3& x) { return tool::shape_distance(shape, Rt * (x - tip)); },
+                               removed, tol_)
+              : stock_.overlap(boxes[i], [&](const Vec3& x) { return sw.distance(x); }, removed, tol_);
       if (ov.depth_mm <= tol_) continue;
       touched = true;
       // Merge with the record of this region on this line at the pose before.
