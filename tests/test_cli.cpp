@@ -203,7 +203,10 @@ TEST(Cli, ContactsPrintByLineAndExitOne) {
   EXPECT_EQ(report["contacts"][0]["region"], "shank");
   EXPECT_EQ(report["contacts"][1]["rapid"], true);
   EXPECT_EQ(report["tools_used"][0]["number"], 3);
-  EXPECT_TRUE(std::filesystem::exists(outdir + "/plunge.glb"));
+  // The glb marks each contact with a node named by its line.
+  const std::string glb = slurp(outdir + "/plunge.glb");
+  EXPECT_NE(glb.find("\"contact line 3 shank"), std::string::npos);
+  EXPECT_NE(glb.find("\"contact line 4 rapid shank"), std::string::npos);
 
   // Within the flutes: clean, exit 0.
   const std::string ok = dir.write("ok.nc", "T3 M6\nG0 X0 Y0 Z1\nG1 Z-0.8 F100\nG0 Z1\nM30\n");

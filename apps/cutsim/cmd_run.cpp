@@ -64,6 +64,23 @@ std::vector<std::array<float, 4>> deviation_colors(const std::vector<float>& dev
   }
   return c;
 }
+// A marker at a contact: an octahedron of radius r with flat faces.
+TriMesh octahedron(const Vec3& c, double r) {
+  TriMesh m;
+  const Vec3 v[6] = {c + Vec3(r, 0, 0), c - Vec3(r, 0, 0), c + Vec3(0, r, 0),
+                     c - Vec3(0, r, 0), c + Vec3(0, 0, r), c - Vec3(0, 0, r)};
+  const int faces[8][3] = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4}, {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+  for (const auto& f : faces) {
+    const Vec3 n = (v[f[1]] - v[f[0]]).cross(v[f[2]] - v[f[0]]).normalized();
+    for (int k = 0; k < 3; ++k) {
+      m.positions.push_back(v[f[k]]);
+      m.normals.push_back(n.cast<float>());
+    }
+    const auto b = static_cast<std::uint32_t>(m.positions.size() - 3);
+    m.triangles.push_back({b, b + 1, b + 2});
+  }
+  return m;
+}
 }  // namespace
 
 Action add_run_command(CLI::App& app) {
@@ -178,6 +195,27 @@ Action add_run_command(CLI::App& app) {
     if (res.comparison) {
       parts.push_back(io::GltfPart{"overcut", &res.comparison->overcut_mesh, {0.85f, 0.05f, 0.05f, 1.0f}});
       parts.push_back(io::GltfPart{"undercut", &res.comparison->undercut_mesh, {0.05f, 0.1f, 0.85f, 1.0f}});
+    }
+    // Contact markers: one node per contact (the first 200), named by its NC
+    // line; rapids magenta, clearance faces orange, neck/shank/holder yellow.
+    std::vector<TriMesh> markers;
+    std::vector<std::string> marker_names;
+    const std::size_t n_markers = std::min<std::size_t>(res.contacts.size(), 200);
+    markers.reserve(n_markers);
+    for (std::size_t i = 0; i < n_markers; ++i) {
+      const auto& c = res.contacts[i];
+      markers.push_back(octahedron(c.where, std::max(8 * res.voxel_mm, c.depth_mm)));
+      char name[96];
+      std::snprintf(name, sizeof name, "contact line %d %s%s %.3g um", c.line, c.rapid ? "rapid " : "",
+                    c.region.c_str(), c.depth_mm * 1000);
+      marker_names.push_back(name);
+    }
+    for (std::size_t i = 0; i < n_markers; ++i) {
+      const auto& c = res.contacts[i];
+      const std::array<float, 4> col = c.rapid ? std::array<float, 4>{0.9f, 0.1f, 0.9f, 1.0f}
+                                       : c.region == "clearance-face" ? std::array<float, 4>{1.0f, 0.45f, 0.0f, 1.0f}
+                                                                      : std::array<float, 4>{0.95f, 0.85f, 0.1f, 1.0f};
+      parts.push_back(io::GltfPart{marker_names[i], &markers[i], col});
     }
     io::write_glb(out.glb, parts, gopt);
     res.timing.export_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_exp).count();
