@@ -13,6 +13,7 @@
 #include "cutsim/gcode/program_reader.h"
 #include "cutsim/io/job.h"
 #include "cutsim/io/mesh_io.h"
+#include "cutsim/io/tool_library.h"
 #include "cutsim/machine/environment.h"
 #include "cutsim/machine/kinematics.h"
 #include "cutsim/motion/interpreter.h"
@@ -114,6 +115,28 @@ inline void environment_input(const std::uint8_t* data, std::size_t size) {
   } catch (const Error&) {
   }
   std::remove(path.c_str());
+}
+
+/// First byte: bit 0 chooses a LinuxCNC table (1) or a TOML library (0);
+/// the rest is the file. Each loaded tool's regions are measured.
+inline void tools_input(const std::uint8_t* data, std::size_t size) {
+  if (size == 0) return;
+  const std::string text(reinterpret_cast<const char*>(data) + 1, size - 1);
+  try {
+    io::ToolLibrary lib;
+    if (data[0] & 1) {
+      std::istringstream in(text);
+      lib = io::parse_linuxcnc_tbl(in, "fuzz.tbl");
+    } else {
+      lib = io::parse_tool_library_toml(text, "fuzz.toml");
+    }
+    for (const auto& [n, t] : lib.tools) {
+      volatile double sink = tool::shape_distance(tool::cutting_shape(t), Vec3(0.1, 0.2, 0.3));
+      for (const auto& r : tool::contact_regions(t)) sink = sink + tool::shape_bounds(r.shape).volume();
+      (void)sink;
+    }
+  } catch (const Error&) {
+  }
 }
 
 }  // namespace cutsim::fuzz

@@ -26,6 +26,7 @@ TEST(FuzzRegressions, GcodeInputsEndInAnAnswer) { EXPECT_GE(replay("gcode", &fuz
 TEST(FuzzRegressions, JobInputsEndInAnAnswer) { EXPECT_GE(replay("job", &fuzz::job_input), 1u); }
 TEST(FuzzRegressions, MachineInputsEndInAnAnswer) { EXPECT_GE(replay("machine", &fuzz::machine_input), 1u); }
 TEST(FuzzRegressions, MeshInputsEndInAnAnswer) { EXPECT_GE(replay("mesh", &fuzz::mesh_input), 1u); }
+TEST(FuzzRegressions, ToolLibraryInputsEndInAnAnswer) { EXPECT_GE(replay("tools", &fuzz::tools_input), 3u); }
 TEST(FuzzRegressions, EnvironmentInputsEndInAnAnswer) { EXPECT_GE(replay("environment", &fuzz::environment_input), 1u); }
 
 }  // namespace
