@@ -183,6 +183,40 @@ TEST(Interference, FlyCutterFaceIsFlatToTheFeedPerRevolutionScallop) {
   EXPECT_NEAR(r.stock->surface_height(x_lo + f / 2, 0, 0.01), lo + scallop, h);
 }
 
+// Facing on the xzc lathe with a non-rotating round-nose tool: the tool
+// frame turns with C, and the cutting direction (orient 90: the tool
+// frame's +Y) follows the rotation, so the tool cuts tangentially. A
+// 10 um face over the 2 x 2 mm block, 0.1 mm feed per revolution with a
+// 0.5 mm nose: removed = area (depth - f^2 / (24 r)), the mean height of the
+// nose-radius scallops subtracted.
+TEST(Interference, NoseToolFacesOnTheLatheWithItsOrientationInThePose) {
+  TempDir dir;
+  std::ostringstream os;
+  os.precision(10);
+  const double feed = 0.1, depth = 0.01, r = 0.5;
+  os << "G0 X3 Z1 C0\nG0 Z" << -depth << "\n";
+  const int per_rev = 18;
+  const int steps = static_cast<int>(3.0 / feed) * per_rev;
+  for (int i = 1; i <= steps; ++i)
+    os << "G1 X" << 3.0 - feed * i / per_rev << " C" << 360.0 * i / per_rev << " F1000\n";
+  os << "G0 Z1\nM30\n";
+  sim::SimOptions o;
+  o.program = dir.write("face.nc", os.str());
+  o.tool = tool::parse_tool_spec("nose:r=0.5,clearance=7,orient=90");
+  o.machine = "xzc";
+  o.stock_box = Aabb{Vec3(-1, -1, -1), Vec3(1, 1, 0)};
+  o.voxel_mm = 0.005;
+  const auto res = sim::simulate(o);
+  EXPECT_TRUE(res.contacts.empty()) << sim::format_contact(res.contacts.front(), "face.nc");
+  const double expected = 4 * (depth - feed * feed / (24 * r));
+  // Volume accuracy of the grid: 0.05 h per mm^2 of cut surface (4 mm^2).
+  EXPECT_NEAR(res.stock->removed_volume_mm3(), expected, 0.05 * 0.005 * 4 + 2e-4);
+  // The face is at -depth under the nose's passes, the scallop above it.
+  const double z = res.stock->surface_height(0.5, 0.3, 0.01);
+  EXPECT_GE(z, -depth - 0.003);
+  EXPECT_LE(z, -depth + feed * feed / (8 * r) + 0.003);
+}
+
 TEST(Interference, StopAtFirstContactEndsTheRunThere) {
   TempDir dir;
   sim::SimOptions o;
