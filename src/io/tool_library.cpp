@@ -52,7 +52,9 @@ ToolLibrary parse_tool_library_toml(const std::string& text, const std::string& 
     if (!t) ctx.fail(n.source(), "each tool must be a table: [[tool]]");
     const toml::node* num = t->get("number");
     if (!num) ctx.fail(t->source(), "this tool has no 'number' (its T number)");
-    const auto nv = num->value<int64_t>();
+    // Integers only: toml++'s float-to-integer conversion casts out-of-range
+    // values unchecked (UB found by fuzzing with `number = 1e21`).
+    const auto nv = num->is_integer() ? num->value<int64_t>() : std::nullopt;
     if (!nv || *nv < 1 || *nv > 99999) ctx.fail(num->source(), "'number' must be an integer T number from 1 to 99999");
     const int number = static_cast<int>(*nv);
     if (lib.tools.count(number)) ctx.fail(num->source(), "T" + std::to_string(number) + " is defined twice");
