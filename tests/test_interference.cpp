@@ -183,6 +183,37 @@ TEST(Interference, FlyCutterFaceIsFlatToTheFeedPerRevolutionScallop) {
   EXPECT_NEAR(r.stock->surface_height(x_lo + f / 2, 0, 0.01), lo + scallop, h);
 }
 
+// The fly-cutter's flywheel (default: 2 nose radii inside the tip circle,
+// one nose radius thick) and its arbor (a third of the swing across, along +Y
+// behind the flywheel). Fed along X in its swing plane, the tip circle's
+// front clears everything the flywheel will occupy, however deep: only
+// the arbor, outside that plane, can meet material (cuts deeper than
+// swing - arbor radius = 3.33 mm). Fed along Y, the flywheel enters
+// material the circle never swept once the cut is deeper than 2 r.
+TEST(Interference, FlyCutterFlywheelAndArborTouchWhereTheSwingDoesNotClear) {
+  TempDir dir;
+  const Aabb stock{Vec3(0, -3, -5), Vec3(2, 3, 0)};
+  const std::string tool = "flycutter:swing=5,r=1";
+  auto run = [&](const std::string& p) { return run_with(dir, p, tool, stock, 0.02); };
+  EXPECT_TRUE(run("G0 X-6 Y0 Z-3\nS1000 M3\nG1 X8 F1000\nG0 Z1\nM30\n").contacts.empty());
+  const auto arbor = run("G0 X-6 Y0 Z-4\nS1000 M3\nG1 X8 F1000\nG0 Z1\nM30\n");
+  ASSERT_FALSE(arbor.contacts.empty());
+  EXPECT_EQ(arbor.contacts[0].line, 3);
+  EXPECT_EQ(arbor.contacts[0].region, "shank");
+  EXPECT_GE(arbor.contacts[0].where.y(), 1.0 - 0.02);                // behind the flywheel
+  EXPECT_LE(arbor.contacts[0].where.z(), 0.0);
+  EXPECT_GE(arbor.contacts[0].where.z(), -4 + 5 - 5.0 / 3 - 0.02);  // above the arbor's underside
+  EXPECT_TRUE(run("G0 X1 Y-8 Z-1.5\nS1000 M3\nG1 Y8 F1000\nG0 Z1\nM30\n").contacts.empty());
+  const auto wheel = run("G0 X1 Y-8 Z-2.5\nS1000 M3\nG1 Y8 F1000\nG0 Z1\nM30\n");
+  ASSERT_FALSE(wheel.contacts.empty());
+  EXPECT_EQ(wheel.contacts[0].line, 3);
+  EXPECT_EQ(wheel.contacts[0].region, "holder");
+  // The flywheel's rim is 2 mm above the tip: in the material from z = -0.5 up.
+  EXPECT_GE(wheel.contacts[0].where.z(), -0.5 - 0.02);
+  // A flywheel that reaches into the nose is refused.
+  EXPECT_THROW(tool::parse_tool_spec("flycutter:swing=5,r=1,holder_d=9,holder_l=1"), ConfigError);
+}
+
 // Facing on the xzc lathe with a non-rotating round-nose tool: the tool
 // frame turns with C, and the cutting direction (orient 90: the tool
 // frame's +Y) follows the rotation, so the tool cuts tangentially. A

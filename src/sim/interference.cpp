@@ -58,22 +58,26 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     const double s = static_cast<double>(k) / n;
     const double s_prev = static_cast<double>(k - 1) / n;
     const Pose pose = planner_.pose_at(m, pm, s);
-    const Eigen::Matrix3d Rt = pose.linear().transpose();
     const Vec3 tip = pose.translation();
     ++pose_index_;
     // Skip poses whose regions all miss the material's reach.
     bool any = false;
     std::vector<Aabb> boxes;
+    std::vector<Pose> at(regions.size());  // each region's frame in the workpiece
     std::vector<sweep::Sweep> sweeps(regions.size());
     for (std::size_t i = 0; i < regions.size(); ++i) {
-      Aabb b = sweep::world_box(tool::shape_bounds(regions[i].shape), pose.linear(), tip);
-      if (swept(regions[i].shape)) {
-        b.extend(sweep::world_box(tool::shape_bounds(regions[i].shape), prev.linear(), prev.translation()));
+      const tool::Region& rg = regions[i];
+      at[i] = pose * rg.frame;
+      const Pose before = prev * rg.frame;
+      Aabb b = sweep::world_box(tool::shape_bounds(rg.shape), at[i].linear(), at[i].translation());
+      if (swept(rg.shape)) {
+        b.extend(sweep::world_box(tool::shape_bounds(rg.shape), before.linear(), before.translation()));
         if (b.expanded(0.1 * b.size().norm()).overlaps(reach)) {
-          sweeps[i] = straight ? sweep::sweep_line(prev.translation(), tip, pose.linear(), regions[i].shape)
-                               : sweep::sweep_poses(
-                                     [&](double u) { return planner_.pose_at(m, pm, s_prev + u * (s - s_prev)); },
-                                     regions[i].shape, sweep_tol_, 1);
+          sweeps[i] =
+              straight ? sweep::sweep_line(before.translation(), at[i].translation(), at[i].linear(), rg.shape)
+                       : sweep::sweep_poses(
+                             [&](double u) { return planner_.pose_at(m, pm, s_prev + u * (s - s_prev)) * rg.frame; },
+                             rg.shape, sweep_tol_, 1);
           b = sweeps[i].bounds;
         }
       }
@@ -84,11 +88,7 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     if (!any) continue;
     // What the cutting part removed from the move's start to this pose.
     sweep::Sweep so_far;
-    if (!rapid) {
-      if (straight) so_far = sweep::sweep_line(p0.translation(), tip, p0.linear(), cut);
-      else
-        so_far = sweep::sweep_poses([&](double u) { return planner_.pose_at(m, pm, u * s); }, cut, sweep_tol_, 4);
-    }
+    if (!rapid) so_far = planner_.sweep_part(m, pm, tool, 0.0, s);
     std::function<double(const Vec3&)> removed;
     if (!so_far.prims.empty()) removed = [&so_far](const Vec3& x) { return so_far.distance(x); };
     for (std::size_t i = 0; i < regions.size(); ++i) {
@@ -97,7 +97,8 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
       const sweep::Sweep& sw = sweeps[i];
       const stock::Overlap ov =
           sw.prims.empty()
-              ? stock_.overlap(boxes[i], [&](const Vec3& x) { return tool::shape_distance(shape, Rt * (x - tip)); },
+              ? stock_.overlap(boxes[i],
+                               [&, inv = at[i].inverse()](const Vec3& x) { return tool::shape_distance(shape, inv * x); },
                                removed, tol_)
               : stock_.overlap(boxes[i], [&](const Vec3& x) { return sw.distance(x); }, removed, tol_);
       if (ov.depth_mm <= tol_) continue;

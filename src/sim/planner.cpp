@@ -88,10 +88,36 @@ Pose Planner::pose_at(const motion::Move& m, const PlannedMove& p, double s) con
   return kin_.tool_pose(joints_at(m, p, s));
 }
 
+namespace {
+bool per_revolution(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) {
+  return tool.kind == tool::ToolKind::flycutter && m.spindle_rpm > 0 && m.kind != motion::MotionKind::rapid &&
+         p.t1 > p.t0;
+}
+}  // namespace
+
+sweep::Sweep Planner::sweep_part(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool, double s0,
+                                 double s1) const {
+  if (s0 <= 0 && s1 >= 1) return sweep(m, p, tool);
+  const tool::Shape shape = tool::cutting_shape(tool);
+  if (per_revolution(m, p, tool)) {
+    const double rev_s = 60.0 / m.spindle_rpm, ta = p.t0 + s0 * (p.t1 - p.t0), tb = p.t0 + s1 * (p.t1 - p.t0);
+    std::vector<Pose> poses;
+    for (double k = std::floor(ta / rev_s) + 1; k * rev_s <= tb; k += 1)
+      poses.push_back(pose_at(m, p, (k * rev_s - p.t0) / (p.t1 - p.t0)));
+    return sweep::sweep_tori(poses, std::get<tool::SwingTorus>(shape));
+  }
+  const bool rotary_fixed = (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
+  if (!m.is_arc() && rotary_fixed) {
+    const Pose a = pose_at(m, p, s0), b = pose_at(m, p, s1);
+    return sweep::sweep_line(a.translation(), b.translation(), a.linear(), shape);
+  }
+  return sweep::sweep_poses([&](double u) { return pose_at(m, p, s0 + u * (s1 - s0)); }, shape,
+                            opt_.sweep_tolerance_mm, 4);
+}
+
 sweep::Sweep Planner::sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const {
   const tool::Shape shape = tool::cutting_shape(tool);
-  if (tool.kind == tool::ToolKind::flycutter && m.spindle_rpm > 0 && m.kind != motion::MotionKind::rapid &&
-      p.t1 > p.t0) {
+  if (per_revolution(m, p, tool)) {
     // One swing torus per revolution, at the instants the program's time
     // line puts them (phase continuous from program start).
     const double rev_s = 60.0 / m.spindle_rpm;

@@ -338,7 +338,7 @@ SimResult simulate(const SimOptions& opt) {
       for (const auto& r : tool::contact_regions(t)) {
         const Aabb lb = tool::shape_bounds(r.shape);
         for (int i = 0; i <= n; ++i) {
-          const Pose q = planner.pose_at(m, pm, static_cast<double>(i) / n);
+          const Pose q = planner.pose_at(m, pm, static_cast<double>(i) / n) * r.frame;
           const Aabb b = sweep::world_box(lb, q.linear(), q.translation()).expanded(n > 1 ? 0.1 * lb.size().norm() : 0.0);
           if (b.overlaps(stock_reach)) roi.extend(b.intersected(stock_reach));
         }

@@ -273,7 +273,14 @@ Aabb world_box(const Aabb& local, const Eigen::Matrix3d& R, const Vec3& tip) {
 
 double Sweep::distance(const Vec3& x) const {
   double d = std::numeric_limits<double>::infinity();
-  for (const Primitive& p : prims) d = std::min(d, sweep::distance(p, x));
+  for (const Primitive& p : prims) {
+    // A piece's box is no farther than the piece: skip pieces whose box is
+    // already beyond the nearest distance found.
+    const Aabb& b = sweep::bounds(p);
+    const double out = (b.min - x).cwiseMax(x - b.max).cwiseMax(0.0).norm();
+    if (out > 0 && out >= d) continue;
+    d = std::min(d, sweep::distance(p, x));
+  }
   return d;
 }
 

@@ -160,7 +160,19 @@ Shape cutting_shape(const Tool& t) {
 std::vector<Region> contact_regions(const Tool& t) {
   std::vector<Region> out;
   switch (t.kind) {
-    case ToolKind::flycutter: break;
+    case ToolKind::flycutter: {
+      // About the spindle axis (tool +Y) through (0, 0, swing): the
+      // flywheel (holder) centred on the swing plane, the arbor (shank)
+      // behind it along +Y.
+      Pose f = Pose::Identity();
+      f.linear() = Eigen::AngleAxisd(-kPi / 2, Vec3::UnitX()).toRotationMatrix();  // local +Z -> tool +Y
+      f.translation() = Vec3(0, 0, t.swing_radius_mm);
+      if (t.holder_length_mm > 0)
+        out.push_back({"holder", RevolvedEnvelope{t.holder_diameter_mm / 2, 0, t.holder_length_mm, -t.holder_length_mm / 2}, f});
+      if (t.shank_length_mm > 0)
+        out.push_back({"shank", RevolvedEnvelope{t.shank_diameter_mm / 2, 0, t.shank_length_mm, t.holder_length_mm / 2}, f});
+      break;
+    }
     case ToolKind::nose:
     case ToolKind::vtool:
       out.push_back({"clearance-face", FlankBody{edge_of(t), deg_to_rad(t.clearance_angle_deg),
@@ -195,7 +207,7 @@ Tool make_tool(const std::string& kind, const std::map<std::string, double>& kv,
     if (t.kind == ToolKind::bull) known.insert("r");
   } else if (kind == "flycutter") {
     t.kind = ToolKind::flycutter;
-    known = {"swing", "r"};
+    known = {"swing", "r", "shank_d", "shank_l", "holder_d", "holder_l"};
   } else if (kind == "nose" || kind == "vtool") {
     t.kind = kind == "nose" ? ToolKind::nose : ToolKind::vtool;
     known = {"angle", "rake", "clearance", "orient", "h", "body"};
@@ -248,6 +260,21 @@ Tool make_tool(const std::string& kind, const std::map<std::string, double>& kv,
     if (t.corner_radius_mm >= t.swing_radius_mm) fail("nose radius must be smaller than the swing radius");
     t.diameter_mm = 2 * t.swing_radius_mm;
     t.flute_length_mm = 2 * t.corner_radius_mm;
+    // Flywheel: by default reaching to 2 nose radii inside the tip circle,
+    // one nose radius thick (half the nose's width, so the tip circle's
+    // tube clears it between revolutions); arbor: a third of the swing, 50 mm.
+    const double reach = t.swing_radius_mm - 2 * t.corner_radius_mm;
+    t.holder_diameter_mm = get("holder_d", std::max(0.0, 2 * reach));
+    t.holder_length_mm = get("holder_l", t.holder_diameter_mm > 0 ? t.corner_radius_mm : 0.0);
+    t.shank_diameter_mm = get("shank_d", 2 * t.swing_radius_mm / 3);
+    t.shank_length_mm = get("shank_l", 50.0);
+    if (t.holder_diameter_mm < 0 || t.holder_length_mm < 0 || (t.holder_diameter_mm > 0) != (t.holder_length_mm > 0))
+      fail("a flywheel (holder) needs both holder_d and holder_l, positive");
+    if (t.holder_diameter_mm / 2 > t.swing_radius_mm - t.corner_radius_mm)
+      fail("the flywheel (holder_d / 2) must stay inside the tip circle less the nose radius");
+    if (!(t.shank_diameter_mm > 0) || t.shank_length_mm < 0) fail("arbor (shank) sizes must be positive");
+    if (t.shank_diameter_mm / 2 > t.swing_radius_mm - t.corner_radius_mm)
+      fail("the arbor (shank_d / 2) must stay inside the tip circle less the nose radius");
     return t;
   }
   t.diameter_mm = need("d", "the diameter");

@@ -42,6 +42,10 @@ public:
   Pose pose_at(const motion::Move& m, const PlannedMove& p, double s) const;
   /// The cutting envelope's swept region over the move.
   sweep::Sweep sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const;
+  /// The swept region over the part [s0, s1] of the move (a fly-cutter's
+  /// revolutions that fall in it; other tools within the sweep tolerance).
+  sweep::Sweep sweep_part(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool, double s0,
+                          double s1) const;
   /// Feeds the axis monitor (arcs and multi-axis moves in sub-steps).
   void monitor(const motion::Move& m, const PlannedMove& p, machine::AxisMonitor& mon) const;
 

@@ -34,6 +34,8 @@ struct Tool {
   double neck_diameter_mm = 0, neck_length_mm = 0;      ///< 0: no neck
   double shank_diameter_mm = 0, shank_length_mm = 0;    ///< default: d and 30 mm
   double holder_diameter_mm = 0, holder_length_mm = 0;  ///< 0: no holder envelope
+  // A fly-cutter's shank is its arbor and its holder the flywheel, both
+  // about the spindle axis; it has no neck.
   // Fly-cutter.
   double swing_radius_mm = 0;   ///< spindle axis to the tip
   // Non-rotating diamond tools (nose, vtool).
@@ -107,6 +109,9 @@ double profile_distance_2d(const EdgeProfile& e, double y, double z, double* gy 
 struct Region {
   std::string name;  ///< "clearance-face", "neck", "shank", "holder"
   Shape shape;
+  /// Where the shape's own frame sits in the tool frame (a fly-cutter's
+  /// parts turn about its spindle axis, the tool frame's Y).
+  Pose frame = Pose::Identity();
 };
 
 /// The part that removes material.
