@@ -53,6 +53,25 @@ Coord ceil_coord(const Vec3& v) {
                static_cast<int>(std::ceil(v.z())));
 }
 
+// Calls leaf(origin) for each leaf-sized block of `bb`, visiting the
+// 128-voxel blocks whose centre (world) `keep_node` accepts.
+template <class KeepNode, class Leaf>
+void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, KeepNode keep_node, Leaf leaf) {
+  const Coord q0(bb.min().x() & ~(kNode1Dim - 1), bb.min().y() & ~(kNode1Dim - 1), bb.min().z() & ~(kNode1Dim - 1));
+  for (int x1 = q0.x(); x1 <= bb.max().x(); x1 += kNode1Dim)
+    for (int y1 = q0.y(); y1 <= bb.max().y(); y1 += kNode1Dim)
+      for (int z1 = q0.z(); z1 <= bb.max().z(); z1 += kNode1Dim) {
+        if (!keep_node(Vec3(origin + h * (Vec3(x1, y1, z1).array() + 0.5 * (kNode1Dim - 1)).matrix()))) continue;
+        CoordBBox part = CoordBBox::createCube(Coord(x1, y1, z1), kNode1Dim);
+        part.intersect(bb);
+        if (part.empty()) continue;
+        const Coord p0(part.min().x() & ~(kLeafDim - 1), part.min().y() & ~(kLeafDim - 1), part.min().z() & ~(kLeafDim - 1));
+        for (int x = p0.x(); x <= part.max().x(); x += kLeafDim)
+          for (int y = p0.y(); y <= part.max().y(); y += kLeafDim)
+            for (int z = p0.z(); z <= part.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
+      }
+}
+
 }  // namespace
 
 std::size_t estimate_memory_bytes(const Aabb& box, const Aabb& roi, const StockOptions& opt) {
@@ -232,20 +251,7 @@ void Stock::subtract(const sweep::Sweep& sw) {
   // Coarse blocks first (the distance is a lower bound, so a block whose
   // centre is farther than the band plus its half diagonal is untouched).
   const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * m.h;
-  const Coord q0(bb.min().x() & ~(kNode1Dim - 1), bb.min().y() & ~(kNode1Dim - 1), bb.min().z() & ~(kNode1Dim - 1));
-  for (int x1 = q0.x(); x1 <= bb.max().x(); x1 += kNode1Dim)
-    for (int y1 = q0.y(); y1 <= bb.max().y(); y1 += kNode1Dim)
-      for (int z1 = q0.z(); z1 <= bb.max().z(); z1 += kNode1Dim) {
-        const Vec3 c1 = m.origin + m.h * (Vec3(x1, y1, z1).array() + 0.5 * (kNode1Dim - 1)).matrix();
-        if (sw.distance(c1) > g + hd1) continue;
-        CoordBBox part = CoordBBox::createCube(Coord(x1, y1, z1), kNode1Dim);
-        part.intersect(bb);
-        if (part.empty()) continue;
-        const Coord p0(part.min().x() & ~(kLeafDim - 1), part.min().y() & ~(kLeafDim - 1), part.min().z() & ~(kLeafDim - 1));
-        for (int x = p0.x(); x <= part.max().x(); x += kLeafDim)
-          for (int y = p0.y(); y <= part.max().y(); y += kLeafDim)
-            for (int z = p0.z(); z <= part.max().z(); z += kLeafDim) visit_leaf(Coord(x, y, z));
-      }
+  for_each_leaf_block(m.origin, m.h, bb, [&](const Vec3& c1) { return sw.distance(c1) <= g + hd1; }, visit_leaf);
   if (leaves.empty()) return;
 
   // Voxels, in parallel: new = max(old, -tool), clamped to the band.
@@ -302,26 +308,13 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   // Blocks the region can reach (its distance is a lower bound outside),
   // skipping air tiles.
   std::vector<Coord> blocks;
-  const Coord q0(bb.min().x() & ~(kNode1Dim - 1), bb.min().y() & ~(kNode1Dim - 1), bb.min().z() & ~(kNode1Dim - 1));
-  for (int x1 = q0.x(); x1 <= bb.max().x(); x1 += kNode1Dim)
-    for (int y1 = q0.y(); y1 <= bb.max().y(); y1 += kNode1Dim)
-      for (int z1 = q0.z(); z1 <= bb.max().z(); z1 += kNode1Dim) {
-        const Vec3 c1 = m.origin + m.h * (Vec3(x1, y1, z1).array() + 0.5 * (kNode1Dim - 1)).matrix();
-        if (region(c1) > hd1 - min_depth_mm) continue;
-        CoordBBox part = CoordBBox::createCube(Coord(x1, y1, z1), kNode1Dim);
-        part.intersect(bb);
-        if (part.empty()) continue;
-        const Coord p0(part.min().x() & ~(kLeafDim - 1), part.min().y() & ~(kLeafDim - 1), part.min().z() & ~(kLeafDim - 1));
-        for (int x = p0.x(); x <= part.max().x(); x += kLeafDim)
-          for (int y = p0.y(); y <= part.max().y(); y += kLeafDim)
-            for (int z = p0.z(); z <= part.max().z(); z += kLeafDim) {
-              const Coord o(x, y, z);
-              const Vec3 c0 = m.origin + m.h * (Vec3(x, y, z).array() + 0.5 * (kLeafDim - 1)).matrix();
-              if (region(c0) > hd0 - min_depth_mm) continue;
-              if (!tree.probeConstLeaf(o) && tree.getValue(o) > 0) continue;  // air tile
-              blocks.push_back(o);
-            }
-      }
+  for_each_leaf_block(m.origin, m.h, bb, [&](const Vec3& c1) { return region(c1) <= hd1 - min_depth_mm; },
+                      [&](const Coord& o) {
+                        const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
+                        if (region(c0) > hd0 - min_depth_mm) return;
+                        if (!tree.probeConstLeaf(o) && tree.getValue(o) > 0) return;  // air tile
+                        blocks.push_back(o);
+                      });
   if (blocks.empty()) return best;
   std::mutex mu;
   std::atomic<bool> saturated{false};
