@@ -3,6 +3,7 @@
 #include <sys/wait.h>
 
 #include <cstdlib>
+#include <cstring>
 #include <unistd.h>
 #include <nlohmann/json.hpp>
 
@@ -207,6 +208,25 @@ TEST(Cli, ContactsPrintByLineAndExitOne) {
   const std::string glb = slurp(outdir + "/plunge.glb");
   EXPECT_NE(glb.find("\"contact line 3 shank"), std::string::npos);
   EXPECT_NE(glb.find("\"contact line 4 rapid shank"), std::string::npos);
+  {
+    ASSERT_GT(glb.size(), 20u);
+    std::uint32_t json_len = 0;
+    std::memcpy(&json_len, glb.data() + 12, 4);
+    const auto gj = nlohmann::json::parse(glb.substr(20, json_len));
+    int found = 0;
+    for (const auto& node : gj["nodes"])
+      if (node.contains("extras") && node["extras"].value("kind", "") == "contact") {
+        const auto& ex = node["extras"];
+        if (ex["line"] == 3) {
+          EXPECT_EQ(ex["region"], "shank");
+          EXPECT_EQ(ex["text"], "G1 Z-1.5 F100");
+          EXPECT_EQ(ex["motion"], "feed");
+          EXPECT_DOUBLE_EQ(ex["depth_mm"].get<double>(), report["contacts"][0]["depth_mm"].get<double>());
+        }
+        ++found;
+      }
+    EXPECT_EQ(found, 2);
+  }
 
   // Within the flutes: clean, exit 0.
   const std::string ok = dir.write("ok.nc", "T3 M6\nG0 X0 Y0 Z1\nG1 Z-0.8 F100\nG0 Z1\nM30\n");

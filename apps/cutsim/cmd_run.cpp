@@ -215,7 +215,11 @@ Action add_run_command(CLI::App& app) {
       const std::array<float, 4> col = c.rapid ? std::array<float, 4>{0.9f, 0.1f, 0.9f, 1.0f}
                                        : c.region == "clearance-face" ? std::array<float, 4>{1.0f, 0.45f, 0.0f, 1.0f}
                                                                       : std::array<float, 4>{0.95f, 0.85f, 0.1f, 1.0f};
-      parts.push_back(io::GltfPart{marker_names[i], &markers[i], col});
+      io::GltfPart mp{marker_names[i], &markers[i], col};
+      mp.extras_text = {{"kind", "contact"}, {"region", c.region}, {"text", c.text}, {"motion", c.rapid ? "rapid" : "feed"}};
+      mp.extras_number = {{"line", c.line}, {"depth_mm", c.depth_mm}, {"depth_at_least", c.at_least ? 1.0 : 0.0},
+                          {"poses", c.poses}};
+      parts.push_back(std::move(mp));
     }
     io::write_glb(out.glb, parts, gopt);
     res.timing.export_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_exp).count();

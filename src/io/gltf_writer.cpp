@@ -143,6 +143,12 @@ std::string glb_bytes(const std::vector<GltfPart>& parts, const GltfOptions& opt
     node.name = part.name;
     node.mesh = static_cast<int>(model.meshes.size() - 1);
     node.translation = {local.x() * kMetresPerMm, local.y() * kMetresPerMm, local.z() * kMetresPerMm};
+    if (!part.extras_text.empty() || !part.extras_number.empty()) {
+      tinygltf::Value::Object ex;
+      for (const auto& [k, v] : part.extras_text) ex[k] = tinygltf::Value(v);
+      for (const auto& [k, v] : part.extras_number) ex[k] = tinygltf::Value(v);
+      node.extras = tinygltf::Value(ex);
+    }
     model.nodes.push_back(node);
     model.nodes[0].children.push_back(static_cast<int>(model.nodes.size() - 1));
   }
