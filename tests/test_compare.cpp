@@ -217,3 +217,48 @@ TEST(Compare, MeshFormatsLoadTheSameSolid) {
 
 }  // namespace
 }  // namespace cutsim::test
+
+namespace cutsim::test {
+
+// `run --save-vdb` keeps the stock; `cutsim compare` on it gives the run's
+// figures without simulating, and a closed mesh can be compared too.
+TEST(Compare, SavedStockComparesAgainWithoutSimulating) {
+  TempDir dir;
+  const auto target = write_stl(dir, slotted_block(), "target.stl");
+  const auto p = dir.write("slot.nc", "G0 X-2 Y0 Z1\nG1 Z-0.105 F100\nG1 X3\nG1 Z-0.1\nG1 X8\nG0 Z1\n");
+  std::string out, err;
+  ASSERT_EQ(run_cli("run " + p + " --tool flat:d=2 --stock-box 0,-2,-1,6,2,0 --voxel 0.005 --target " + target +
+                        " --format json --save-vdb -o " + dir.file("out"),
+                    &out, &err),
+            0)
+      << err;
+  const auto run_report = nlohmann::json::parse(out);
+  EXPECT_EQ(run_report["outputs"]["vdb"], dir.file("out/slot.vdb"));
+  ASSERT_EQ(run_cli("compare " + dir.file("out/slot.vdb") + " " + target + " --format json -o " + dir.file("cmp"), &out,
+                    &err),
+            0)
+      << err;
+  const auto c = nlohmann::json::parse(out);
+  EXPECT_DOUBLE_EQ(c["overcut_volume_mm3"].get<double>(), run_report["overcut_volume_mm3"].get<double>());
+  EXPECT_DOUBLE_EQ(c["undercut_volume_mm3"].get<double>(), run_report["undercut_volume_mm3"].get<double>());
+  EXPECT_NEAR(c["max_overcut_mm"].get<double>(), run_report["max_overcut_mm"].get<double>(), 1e-9);
+  EXPECT_TRUE(std::filesystem::exists(dir.file("cmp/slot.compare.glb")));
+  EXPECT_TRUE(std::filesystem::exists(dir.file("cmp/slot.compare.json")));
+
+  // The target against itself, as a mesh: nothing over or under beyond the
+  // voxel accuracy (0.05 h per mm^2 of its 50 mm^2 surface).
+  ASSERT_EQ(run_cli("compare " + target + " " + target + " --voxel 0.01 --format json -o " + dir.file("cmp"), &out, &err), 0)
+      << err;
+  const auto self = nlohmann::json::parse(out);
+  EXPECT_LT(self["overcut_volume_mm3"].get<double>(), 0.05 * 0.01 * 50);
+  EXPECT_LT(self["undercut_volume_mm3"].get<double>(), 0.05 * 0.01 * 50);
+  EXPECT_LT(self["max_overcut_mm"].get<double>(), 1e-6);
+
+  // Not a stock: a clear error, no output.
+  const auto bogus = dir.write("bogus.vdb", "not a grid");
+  EXPECT_EQ(run_cli("compare " + bogus + " " + target + " -o " + dir.file("cmp2"), &out, &err), 65);
+  EXPECT_NE(err.find("bogus.vdb: error: not a cutsim stock grid"), std::string::npos) << err;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("cmp2/bogus.compare.glb")));
+}
+
+}  // namespace cutsim::test

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "commands.h"
+#include "outputs.h"
 #include "cutsim/core/error.h"
 #include "cutsim/io/atomic_file.h"
 #include "cutsim/io/gltf_writer.h"
@@ -33,6 +34,7 @@ struct RunArgs {
   std::string tools;
   double contact_tolerance = -1;
   bool stop_at_contact = false;
+  bool save_vdb = false;
   double mesh_adaptivity = 0.01;
   std::string dialect;
   bool block_delete = false;
@@ -45,25 +47,6 @@ struct RunArgs {
   double glb_scale = 1.0;
 };
 
-// Deviation colours, linear RGB: overcut red, undercut blue, within the
-// tolerance neutral; the saturation grows with the deviation.
-std::vector<std::array<float, 4>> deviation_colors(const std::vector<float>& dev, double tol, double max_over,
-                                                   double max_under) {
-  std::vector<std::array<float, 4>> c(dev.size());
-  for (std::size_t i = 0; i < dev.size(); ++i) {
-    const double d = dev[i];
-    if (std::fabs(d) <= tol) {
-      c[i] = {0.55f, 0.55f, 0.55f, 1.0f};
-    } else if (d < 0) {
-      const float t = static_cast<float>(std::min(1.0, (-d - tol) / std::max(max_over - tol, 1e-12)));
-      c[i] = {0.9f, 0.45f * (1 - t), 0.45f * (1 - t), 1.0f};
-    } else {
-      const float t = static_cast<float>(std::min(1.0, (d - tol) / std::max(max_under - tol, 1e-12)));
-      c[i] = {0.45f * (1 - t), 0.45f * (1 - t), 0.9f, 1.0f};
-    }
-  }
-  return c;
-}
 // A marker at a contact: an octahedron of radius r with flat faces.
 TriMesh octahedron(const Vec3& c, double r) {
   TriMesh m;
@@ -100,6 +83,8 @@ Action add_run_command(CLI::App& app) {
                   "contacts shallower than this are not reported, mm (default: a quarter voxel)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_flag("--stop-at-contact", args->stop_at_contact, "stop at the first contact and write the stock as it is then");
+  cmd->add_flag("--save-vdb", args->save_vdb,
+                "also write the stock grid as OUTDIR/<stem>.vdb (OpenVDB), for 'cutsim compare' later");
   cmd->add_option("--dialect", args->dialect, "G-code dialect: rs274ngc (default) or fanuc")
       ->check(CLI::IsMember({"rs274ngc", "fanuc"}));
   cmd->add_flag("--block-delete", args->block_delete, "skip lines that start with '/'");
@@ -179,22 +164,13 @@ Action add_run_command(CLI::App& app) {
     io::GltfOptions gopt;
     gopt.scale = args->glb_scale;
     std::vector<std::array<float, 4>> colors;
+    std::vector<io::GltfPart> parts;
     if (target_mesh) {
       const compare::Target target(std::move(*target_mesh));
       res.comparison = compare::compare(*res.stock, target, mesh, compare::CompareOptions{tolerance});
-      const auto& c = *res.comparison;
-      colors = deviation_colors(c.vertex_deviation_mm, tolerance, c.max_overcut_mm, c.max_undercut_mm);
-      part.colors = &colors;
-      part.deviation_mm = &c.vertex_deviation_mm;
-      gopt.extras_text = {{"colour_scale", "COLOR_0: red overcut, blue undercut, grey within +-tolerance; "
-                                           "_DEVIATION: signed distance to the target in mm, + undercut, - overcut"}};
-      gopt.extras_number = {{"tolerance_mm", tolerance}, {"max_overcut_mm", c.max_overcut_mm},
-                            {"max_undercut_mm", c.max_undercut_mm}};
-    }
-    std::vector<io::GltfPart> parts{part};
-    if (res.comparison) {
-      parts.push_back(io::GltfPart{"overcut", &res.comparison->overcut_mesh, {0.85f, 0.05f, 0.05f, 1.0f}});
-      parts.push_back(io::GltfPart{"undercut", &res.comparison->undercut_mesh, {0.05f, 0.1f, 0.85f, 1.0f}});
+      parts = comparison_parts(*res.comparison, part, gopt, colors);
+    } else {
+      parts.push_back(part);
     }
     // Contact markers: one node per contact (the first 200), named by its NC
     // line; rapids magenta, clearance faces orange, neck/shank/holder yellow.
@@ -222,6 +198,16 @@ Action add_run_command(CLI::App& app) {
       parts.push_back(std::move(mp));
     }
     io::write_glb(out.glb, parts, gopt);
+    if (args->save_vdb) {
+      out.vdb = (fs::path(args->outdir) / (stem + ".vdb")).string();
+      try {
+        res.stock->save_vdb(out.vdb);
+      } catch (...) {
+        std::error_code ec;
+        fs::remove(out.glb, ec);
+        throw;
+      }
+    }
     res.timing.export_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_exp).count();
     res.timing.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const std::string json = sim::report_json(res, out);
@@ -230,6 +216,7 @@ Action add_run_command(CLI::App& app) {
     } catch (...) {
       std::error_code ec;
       fs::remove(out.glb, ec);  // no half a result
+      if (!out.vdb.empty()) fs::remove(out.vdb, ec);
       throw;
     }
     if (args->format == "json") std::cout << json;

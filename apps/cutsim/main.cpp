@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", "cutsim 0.1.0");
   cutsim::app::Action run = cutsim::app::add_run_command(app);
   cutsim::app::Action check = cutsim::app::add_check_command(app);
+  cutsim::app::Action compare = cutsim::app::add_compare_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -43,6 +44,7 @@ int main(int argc, char** argv) {
   try {
     if (app.got_subcommand("run")) return run();
     if (app.got_subcommand("check")) return check();
+    if (app.got_subcommand("compare")) return compare();
   } catch (const cutsim::InterruptedError& e) {
     std::cout.flush();
     std::cerr << e.format() << "\nno output written\n";

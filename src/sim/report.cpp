@@ -79,6 +79,7 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   j["warnings"] = w;
   j["defaults"] = r.defaults.notes;
   j["outputs"] = {{"glb", out.glb}, {"report", out.report}};
+  if (!out.vdb.empty()) j["outputs"]["vdb"] = out.vdb;
   j["timing_s"] = {{"parse", r.timing.parse_s}, {"simulate", r.timing.simulate_s},
                    {"export", r.timing.export_s}, {"total", r.timing.total_s},
                    {"stock_build", r.timing.stock_build_s}, {"plan_and_sweep", r.timing.plan_sweep_s},
@@ -130,6 +131,7 @@ std::string report_text(const SimResult& r, const ReportOutputs& out) {
                 r.timing.parse_s, r.timing.simulate_s, r.timing.export_s, r.timing.total_s, peak_rss_mb());
   os << buf;
   if (!out.glb.empty()) os << "wrote " << out.glb << "\n";
+  if (!out.vdb.empty()) os << "wrote " << out.vdb << "\n";
   if (!out.report.empty()) os << "wrote " << out.report << "\n";
   return os.str();
 }

@@ -9,6 +9,7 @@ namespace cutsim::sim {
 struct ReportOutputs {
   std::string glb;     ///< path written, empty if none
   std::string report;  ///< path of the report itself
+  std::string vdb;     ///< stock grid (--save-vdb), empty if none
 };
 
 /// The report as JSON text. Fields: program, blocks, lines, moves,

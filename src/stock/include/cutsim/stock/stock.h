@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <functional>
 #include <memory>
+#include <string>
 
 #include "cutsim/core/geometry.h"
 #include "cutsim/core/mesh.h"
@@ -95,6 +96,16 @@ public:
   /// larger polygons without cracks.
   TriMesh surface_mesh(double adaptivity = 0.0) const;
 
+  /// Writes the grid with what rebuilds the stock (box, ROI, voxel) to an
+  /// OpenVDB file, atomically. @throw OutputError.
+  void save_vdb(const std::string& path) const;
+  /// Reads a stock written by save_vdb.
+  /// @throw InputError (unreadable), ParseError (not a cutsim stock).
+  static Stock load_vdb(const std::string& path);
+  /// A stock whose material is a closed mesh, as a level set at `voxel_mm`
+  /// (to compare a machined mesh from elsewhere with a target).
+  static Stock from_mesh(const TriMesh& mesh, double voxel_mm);
+
   const Aabb& box() const;
   const Aabb& roi() const;  ///< snapped to voxel cells
   double voxel_mm() const;
@@ -105,6 +116,7 @@ public:
   const Impl& impl() const { return *impl_; }
 
 private:
+  Stock();
   std::unique_ptr<Impl> impl_;
 };
 
