@@ -92,12 +92,12 @@ inline void machine_input(const std::uint8_t* data, std::size_t size) {
   std::remove(path.c_str());
 }
 
-/// First byte: the format (stl, obj, ply, glb); the rest is the file. A
-/// loaded mesh is also checked for closedness.
+/// First byte: the format (stl, obj, ply, glb, gltf); the rest is the
+/// file. A loaded mesh is also checked for closedness.
 inline void mesh_input(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return;
-  static const char* kExt[] = {"stl", "obj", "ply", "glb"};
-  const std::string path = detail::write_temp((std::string("mesh.") + kExt[data[0] % 4]).c_str(), data + 1, size - 1);
+  static const char* kExt[] = {"stl", "obj", "ply", "glb", "gltf"};
+  const std::string path = detail::write_temp((std::string("mesh.") + kExt[data[0] % 5]).c_str(), data + 1, size - 1);
   try {
     const TriMesh m = io::load_mesh(path);
     (void)io::find_defects(m);

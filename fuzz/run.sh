@@ -25,6 +25,7 @@ cp models/machines/*.toml build-fuzz/corpus/machine/
 printf '\x00solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n' > build-fuzz/corpus/mesh/seed.stl
 printf '\x01v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 3 1 4\n' > build-fuzz/corpus/mesh/seed.obj
 printf '\x02ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n' > build-fuzz/corpus/mesh/seed.ply
+cp tests/fuzz_regressions/mesh/seed-triangle.gltf build-fuzz/corpus/mesh/
 printf 'time_s,temperature_c,humidity_pct,pressure_hpa\n0,20,50,1013.25\n60,20.1,49,1013.6\n' > build-fuzz/corpus/environment/seed.csv
 printf '\x01T1 P1 D6.0 Z+12.5 ;6 mm flat end mill\nT2 P2 D1 ;ball l=2 shank_d=4\nT3 D2 ;bull r=0.2\n' > build-fuzz/corpus/tools/seed.tbl
 printf '\x00[[tool]]\nnumber = 1\nkind = "ball"\ndiameter = 1\n[[tool]]\nnumber = 2\nspec = "vtool:angle=90,clearance=7"\n[[tool]]\nnumber = 3\nkind = "flycutter"\nswing_radius = 18\nnose_radius = 2\n' > build-fuzz/corpus/tools/seed.toml

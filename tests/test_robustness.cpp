@@ -152,3 +152,40 @@ TEST(Memory, JobOverTheLimitIsRefusedWithTheFigureAndAVoxelThatFits) {
 
 }  // namespace
 }  // namespace cutsim::test
+
+namespace cutsim::test {
+
+// Programs are streamed: the reader's memory does not grow with the
+// program. 2,000,000 blocks (72 MB) against 200,000: the peak RSS of
+// `cutsim check` may not grow by more than 8 MB (10,000,000 blocks are
+// measured in bench/README.md: 33 MB).
+TEST(Degenerate, MillionsOfBlocksKeepMemoryFlat) {
+#ifdef __SANITIZE_ADDRESS__
+  GTEST_SKIP() << "AddressSanitizer's quarantine keeps freed memory: RSS is not the program's";
+#endif
+  TempDir dir;
+  auto make = [&](const std::string& name, int blocks) {
+    std::ofstream out(dir.file(name));
+    out << "G0 X0 Y0 Z1\nF600\n";
+    char buf[96];
+    for (int i = 0; i < blocks; ++i) {
+      std::snprintf(buf, sizeof buf, "G1 X%.6f Y%.6f Z%.6f\n", (i % 1000) * 0.001, (i % 977) * 0.001, -(i % 13) * 0.001);
+      out << buf;
+    }
+    return dir.file(name);
+  };
+  auto peak = [&](const std::string& prog, int blocks) {
+    std::string out, err;
+    EXPECT_EQ(run_cli("check " + prog, &out, &err), 0) << err;
+    EXPECT_NE(out.find(std::to_string(blocks + 2) + " blocks"), std::string::npos) << out;
+    const auto at = out.find("peak RSS ");
+    EXPECT_NE(at, std::string::npos) << out;
+    return at == std::string::npos ? -1 : std::stoi(out.substr(at + 9));
+  };
+  const int small = peak(make("small.nc", 200000), 200000);
+  const int large = peak(make("large.nc", 2000000), 2000000);
+  EXPECT_GT(small, 0);
+  EXPECT_LE(large, small + 8) << "small " << small << " MB, large " << large << " MB";
+}
+
+}  // namespace cutsim::test

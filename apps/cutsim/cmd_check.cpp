@@ -54,7 +54,8 @@ Action add_check_command(CLI::App& app) {
     for (const auto& w : r.warnings)
       std::cerr << args->program << ":" << w.line << ":" << w.column << ": warning: " << w.message << "\n";
     (args->dump ? std::cerr : std::cout) << args->program << ": " << r.blocks << " blocks, " << r.moves
-                                         << " moves, no errors\n";
+                                         << " moves, no errors (peak RSS " << static_cast<int>(sim::peak_rss_mb())
+                                         << " MB)\n";
     if (!args->machine.empty()) {
       const sim::AxisReport ax = sim::analyze_axes(args->program, popt, args->machine, iopt);
       std::ostream& os = args->dump ? std::cerr : std::cout;
