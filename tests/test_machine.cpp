@@ -11,6 +11,7 @@
 #include "cutsim/machine/kinematics.h"
 #include "cutsim/sim/planner.h"
 #include "cutsim/sim/simulate.h"
+#include "cutsim/io/job.h"
 #include "helpers.h"
 
 namespace cutsim::test {
@@ -124,6 +125,20 @@ TEST(Seeds003, FacesCutAtA0AndA180EndUpTwiceTheAssemblyErrorApart) {
   EXPECT_NEAR(with.second - with.first, 1.00, h);
   const auto without = faces("");
   EXPECT_NEAR(without.second - without.first, 0.0, h);
+}
+
+// The same experiment as the repository's reference case 5
+// (ncprograms/fouraxis_faces.nc with its job): the faces 1.00 mm apart.
+TEST(Seeds003, ReferenceCaseJobReproducesTheStep) {
+  sim::SimOptions o;
+  o.program = std::string(CUTSIM_SOURCE_DIR) + "/ncprograms/fouraxis_faces.nc";
+  o.job = io::load_job(std::string(CUTSIM_SOURCE_DIR) + "/ncprograms/fouraxis_faces.toml");
+  const auto r = sim::simulate(o);
+  EXPECT_TRUE(r.contacts.empty());
+  const double y0 = -24.5;
+  const double f1 = y0 + crossing(*r.stock, Vec3(4, y0, 0), Vec3(4, -20, 0));
+  const double f2 = y0 + crossing(*r.stock, Vec3(16, y0, 0), Vec3(16, -20, 0));
+  EXPECT_NEAR(f2 - f1, 2 * 0.5, 0.05);
 }
 
 TEST(SettingError, WorkpieceSetHigherIsCutDeeper) {
