@@ -239,3 +239,33 @@ TEST(Cli, ContactsPrintByLineAndExitOne) {
 }
 
 }  // namespace cutsim::test
+
+namespace cutsim::test {
+
+// `cutsim bench` runs every case (program + job) of a folder and prints a
+// row per case; the JSON carries the same figures.
+TEST(Cli, BenchRunsTheCasesOfAFolder) {
+  TempDir dir;
+  dir.write("slot.nc", "G0 X-2 Y0 Z1\nG1 Z-0.1 F100\nG1 X2\nG0 Z1\nM30\n");
+  dir.write("slot.toml", "[stock]\nbox = [-1, -1, -1, 1, 1, 0]\n[tool]\nspec = \"flat:d=1\"\n[simulation]\nvoxel_mm = 0.02\n");
+  dir.write("lonely.nc", "G0 X0\n");  // no job: not a case
+  std::string out, err;
+  ASSERT_EQ(run_cli("bench --dir " + dir.path().string() + " --repeat 2 --threads 1 --json " + dir.file("b.json"), &out, &err), 0)
+      << err;
+  EXPECT_NE(out.find("kernel: "), std::string::npos) << out;
+  EXPECT_NE(out.find("\nslot "), std::string::npos) << out;
+  EXPECT_EQ(out.find("lonely"), std::string::npos) << out;
+  const auto j = nlohmann::json::parse(slurp(dir.file("b.json")));
+  ASSERT_EQ(j.size(), 1u);
+  EXPECT_EQ(j[0]["case"], "slot");
+  EXPECT_EQ(j[0]["moves"], 4);
+  EXPECT_EQ(j[0]["repeats"], 2);
+  // A 1 mm flat slot, 0.1 deep, across the 2 mm block: 0.2 mm^3.
+  EXPECT_NEAR(j[0]["removed_mm3"].get<double>(), 0.2, 0.002);
+  EXPECT_GT(j[0]["kernel_updates_per_s"].get<double>(), 0);
+  EXPECT_GT(j[0]["voxel_updates_per_s"].get<double>(), 0);
+  // An unknown case is a missing input.
+  EXPECT_EQ(run_cli("bench nope --dir " + dir.path().string(), &out, &err), 66);
+}
+
+}  // namespace cutsim::test

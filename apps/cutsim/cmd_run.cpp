@@ -9,6 +9,8 @@
 #include <optional>
 #include <vector>
 
+#include <tbb/global_control.h>
+
 #include "commands.h"
 #include "outputs.h"
 #include "cutsim/core/error.h"
@@ -35,6 +37,7 @@ struct RunArgs {
   double contact_tolerance = -1;
   bool stop_at_contact = false;
   bool save_vdb = false;
+  int threads = 0;
   double mesh_adaptivity = 0.01;
   std::string dialect;
   bool block_delete = false;
@@ -83,6 +86,7 @@ Action add_run_command(CLI::App& app) {
                   "contacts shallower than this are not reported, mm (default: a quarter voxel)")
       ->check(CLI::NonNegativeNumber);
   cmd->add_flag("--stop-at-contact", args->stop_at_contact, "stop at the first contact and write the stock as it is then");
+  cmd->add_option("--threads", args->threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
   cmd->add_flag("--save-vdb", args->save_vdb,
                 "also write the stock grid as OUTDIR/<stem>.vdb (OpenVDB), for 'cutsim compare' later");
   cmd->add_option("--dialect", args->dialect, "G-code dialect: rs274ngc (default) or fanuc")
@@ -110,6 +114,9 @@ Action add_run_command(CLI::App& app) {
 
   return [args]() -> int {
     const auto t0 = std::chrono::steady_clock::now();
+    std::optional<tbb::global_control> threads;
+    if (args->threads > 0)
+      threads.emplace(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(args->threads));
     sim::SimOptions opt;
     opt.program = args->program;
     if (!fs::exists(opt.program)) throw InputError(opt.program, "no such file");

@@ -9,6 +9,7 @@ using Action = std::function<int()>;
 Action add_run_command(CLI::App& app);
 Action add_check_command(CLI::App& app);
 Action add_compare_command(CLI::App& app);
+Action add_bench_command(CLI::App& app);
 
 /// A one-line progress bar on stderr, only when stderr is a terminal.
 class ProgressBar {

@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
   cutsim::app::Action run = cutsim::app::add_run_command(app);
   cutsim::app::Action check = cutsim::app::add_check_command(app);
   cutsim::app::Action compare = cutsim::app::add_compare_command(app);
+  cutsim::app::Action bench = cutsim::app::add_bench_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -45,6 +46,7 @@ int main(int argc, char** argv) {
     if (app.got_subcommand("run")) return run();
     if (app.got_subcommand("check")) return check();
     if (app.got_subcommand("compare")) return compare();
+    if (app.got_subcommand("bench")) return bench();
   } catch (const cutsim::InterruptedError& e) {
     std::cout.flush();
     std::cerr << e.format() << "\nno output written\n";

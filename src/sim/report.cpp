@@ -73,6 +73,7 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
                   {"depth_at_least", c.at_least}, {"poses", c.poses}});
   j["contacts"] = cs;
   j["active_voxels"] = st.active_voxels;
+  j["voxel_evaluations"] = st.voxel_evaluations;
   j["leaf_nodes"] = st.leaf_nodes;
   nlohmann::ordered_json w = nlohmann::ordered_json::array();
   for (const auto& x : r.warnings) w.push_back({{"line", x.line}, {"column", x.column}, {"message", x.message}});

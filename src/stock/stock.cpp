@@ -271,6 +271,7 @@ void Stock::subtract(const sweep::Sweep& sw) {
       if (cand.empty()) continue;
       const bool partial = !m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
       bool air = true;
+      std::uint64_t evaluated = 0;
       for (auto it = leaf->beginValueAll(); it; ++it) {
         const Coord c = it.getCoord();
         float v = *it;
@@ -278,6 +279,7 @@ void Stock::subtract(const sweep::Sweep& sw) {
           const Vec3 p = m.origin + m.h * Vec3(c.x(), c.y(), c.z());
           double d = std::numeric_limits<double>::infinity();
           for (const auto* q : cand) d = std::min(d, sweep::distance(*q, p));
+          ++evaluated;
           if (-d > v) {
             v = static_cast<float>(std::min(-d, g));
             it.setValue(v);
@@ -287,6 +289,7 @@ void Stock::subtract(const sweep::Sweep& sw) {
         if (v < m.gamma) air = false;
       }
       all_air[i] = air ? 1 : 0;
+      m.voxel_evaluations.fetch_add(evaluated, std::memory_order_relaxed);
     }
   });
   for (std::size_t i = 0; i < leaves.size(); ++i)
@@ -428,6 +431,7 @@ double Stock::voxel_mm() const { return impl_->h; }
 
 StockStats Stock::stats() const {
   StockStats s;
+  s.voxel_evaluations = impl_->voxel_evaluations.load();
   s.leaf_nodes = impl_->grid->tree().leafCount();
   s.active_voxels = impl_->grid->tree().activeVoxelCount();
   s.memory_bytes = impl_->grid->tree().memUsage();

@@ -1,5 +1,8 @@
 #pragma once
 // Private: the OpenVDB state behind Stock.
+#include <atomic>
+#include <cstdint>
+
 #include <openvdb/openvdb.h>
 
 #include "cutsim/stock/stock.h"
@@ -16,6 +19,7 @@ struct Stock::Impl {
   openvdb::CoordBBox grid_index;  // ROI plus padding: voxels the grid may hold
   openvdb::FloatGrid::Ptr grid;
   double initial_grid_volume = 0;  // coverage volume inside roi_index at build
+  std::atomic<std::uint64_t> voxel_evaluations{0};  // voxels the cuts evaluated (bench figure)
 
   Vec3 index_to_world(const openvdb::Coord& c) const {
     return origin + h * Vec3(c.x(), c.y(), c.z());

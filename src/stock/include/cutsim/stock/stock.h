@@ -39,6 +39,7 @@ struct Overlap {
 };
 
 struct StockStats {
+  std::size_t voxel_evaluations = 0;  ///< tool distances the cuts evaluated so far
   std::size_t leaf_nodes = 0;
   std::size_t active_voxels = 0;
   std::size_t memory_bytes = 0;

@@ -1,0 +1,198 @@
+// cutsim bench [CASES...]: runs reference cases (NC program + job in
+// ncprograms/) as child `cutsim run`s and prints one row per case, with
+// the stock update's voxel rate against the bare kernel measured here.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include "commands.h"
+#include "cutsim/core/error.h"
+#include "cutsim/io/atomic_file.h"
+#include "cutsim/sweep/sweep.h"
+
+namespace cutsim::app {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct BenchArgs {
+  std::vector<std::string> cases;
+  int repeat = 3;
+  int threads = 0;
+  std::string json;
+  std::string dir = "ncprograms";
+};
+
+// The bare voxel-update kernel: a ball-end sweep's distance at the voxels of
+// an in-cache 8 x 8 x 8 block, max with the stock value, written back.
+// Evaluations per second over `threads` threads.
+double kernel_rate(int threads) {
+  const tool::Tool t = tool::parse_tool_spec("ball:d=1", "bench");
+  const sweep::Sweep sw = sweep::sweep_line(Vec3(-0.5, 0, -0.1), Vec3(0.5, 0, -0.1), Eigen::Matrix3d::Identity(), t);
+  const sweep::Primitive prim = sw.prims.front();
+  const int n = std::max(1, threads);
+  const long per_thread = 4'000'000;
+  std::vector<float> sink(static_cast<std::size_t>(n));
+  const auto t0 = std::chrono::steady_clock::now();
+  tbb::parallel_for(0, n, [&](int k) {
+    float v[512];
+    std::fill(std::begin(v), std::end(v), 0.03f);
+    const double h = 0.01;
+    std::vector<Vec3> pos(512);
+    for (int i = 0; i < 512; ++i)
+      pos[static_cast<std::size_t>(i)] = Vec3(-0.04 + 0.001 * k, -0.04, -0.14) + h * Vec3(i >> 6, (i >> 3) & 7, i & 7);
+    for (long it = 0; it < per_thread / 512; ++it)
+      for (int i = 0; i < 512; ++i) {
+        const float d = static_cast<float>(-sweep::distance(prim, pos[static_cast<std::size_t>(i)]));
+        if (d > v[i]) v[i] = std::min(d, 0.03f);
+      }
+    sink[static_cast<std::size_t>(k)] = v[17];
+  });
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  volatile float keep = sink[0];
+  (void)keep;
+  return static_cast<double>(per_thread) * n / s;
+}
+
+// Runs a command, returns its exit status; stdout into `out`, stderr into `err`.
+int run_child(const std::string& cmd, std::string& out, std::string& err) {
+  char tmpl[] = "/tmp/cutsim-bench-XXXXXX";
+  const char* d = ::mkdtemp(tmpl);
+  if (!d) throw OutputError("/tmp", "cannot create a temporary directory");
+  const std::string dir = d;
+  const std::string full = cmd + " >" + dir + "/out 2>" + dir + "/err </dev/null";
+  const int status = std::system(full.c_str());
+  auto slurp = [](const std::string& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  out = slurp(dir + "/out");
+  err = slurp(dir + "/err");
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::string quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+}  // namespace
+
+Action add_bench_command(CLI::App& app) {
+  auto a = std::make_shared<BenchArgs>();
+  CLI::App* cmd = app.add_subcommand("bench", "run reference cases and print a table of time, memory, throughput and results");
+  cmd->add_option("cases", a->cases, "case names: DIR/<name>.nc with DIR/<name>.toml (default: every such pair in DIR)");
+  cmd->add_option("--repeat", a->repeat, "runs per case; times are medians")->check(CLI::PositiveNumber);
+  cmd->add_option("--threads", a->threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--json", a->json, "also write the table as JSON to this file");
+  cmd->add_option("--dir", a->dir, "folder of the cases (default: ncprograms)");
+
+  return [a]() -> int {
+    if (!fs::is_directory(a->dir)) throw InputError(a->dir, "no such folder of cases");
+    std::vector<std::string> cases = a->cases;
+    if (cases.empty()) {
+      for (const auto& e : fs::directory_iterator(a->dir))
+        if (e.path().extension() == ".nc" && fs::exists(fs::path(e.path()).replace_extension(".toml")))
+          cases.push_back(e.path().stem().string());
+      std::sort(cases.begin(), cases.end());
+    }
+    for (const auto& c : cases) {
+      const fs::path nc = fs::path(a->dir) / (c + ".nc");
+      if (!fs::exists(nc)) throw InputError(nc.string(), "no such case (its program is missing)");
+      if (!fs::exists(fs::path(nc).replace_extension(".toml"))) throw InputError(nc.string(), "the case has no job file beside it");
+    }
+    const int threads = a->threads > 0 ? a->threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+    double kernel = 0;
+    {
+      tbb::global_control gc(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
+      kernel = kernel_rate(threads);
+    }
+    const std::string exe = fs::read_symlink("/proc/self/exe").string();
+    char tmpl[] = "/tmp/cutsim-bench-out-XXXXXX";
+    const char* od = ::mkdtemp(tmpl);
+    if (!od) throw OutputError("/tmp", "cannot create a temporary directory");
+    const std::string outdir = od;
+
+    nlohmann::ordered_json rows = nlohmann::ordered_json::array();
+    std::printf("kernel: %.3g voxel updates/s on %d thread%s (ball-end distance, max, write back, in cache)\n", kernel,
+                threads, threads == 1 ? "" : "s");
+    std::printf("%-16s %8s %8s %8s %12s %8s %7s %9s %10s %6s %11s %11s %11s %8s %6s\n", "case", "blocks", "moves",
+                "voxel_um", "active_vox", "wall_s", "rss_MB", "moves/s", "vox_upd/s", "/kern", "removed_mm3",
+                "over_mm3", "under_mm3", "contacts", "axis");
+    int worst = 0;
+    for (const auto& c : cases) {
+      const std::string nc = (fs::path(a->dir) / (c + ".nc")).string();
+      std::vector<double> walls;
+      nlohmann::json rep;
+      for (int r = 0; r < a->repeat; ++r) {
+        std::string out, err;
+        const int code = run_child(quote(exe) + " run " + quote(nc) + " --format json --threads " +
+                                       std::to_string(threads) + " -o " + quote(outdir),
+                                   out, err);
+        if (code != 0 && code != 1) {
+          std::error_code ec;
+          fs::remove_all(outdir, ec);
+          throw Error(static_cast<ExitCode>(code > 0 ? code : 70), SourceLocation{nc, 0, 0, {}},
+                      "case " + c + " failed (exit " + std::to_string(code) + "): " + err);
+        }
+        worst = std::max(worst, code);
+        rep = nlohmann::json::parse(out);
+        walls.push_back(rep["timing_s"]["total"].get<double>());
+      }
+      std::sort(walls.begin(), walls.end());
+      const double wall = walls[walls.size() / 2];
+      const double sim_s = rep["timing_s"]["simulate"].get<double>();
+      const double upd_s = rep["timing_s"]["stock_update"].get<double>();
+      const double evals = rep.value("voxel_evaluations", 0.0);
+      const double moves = rep["moves"].get<double>();
+      const double vps = upd_s > 0 ? evals / upd_s : 0;
+      nlohmann::ordered_json row;
+      row["case"] = c;
+      row["blocks"] = rep["blocks"];
+      row["moves"] = rep["moves"];
+      row["voxel_mm"] = rep["voxel_size_mm"];
+      row["active_voxels"] = rep["active_voxels"];
+      row["wall_s"] = wall;
+      row["repeats"] = a->repeat;
+      row["peak_rss_mb"] = rep["peak_rss_mb"];
+      row["moves_per_s"] = sim_s > 0 ? moves / sim_s : 0;
+      row["voxel_updates_per_s"] = vps;
+      row["kernel_updates_per_s"] = kernel;
+      row["update_to_kernel"] = kernel > 0 ? vps / kernel : 0;
+      row["removed_mm3"] = rep["removed_volume_mm3"];
+      row["overcut_mm3"] = rep.value("overcut_volume_mm3", 0.0);
+      row["undercut_mm3"] = rep.value("undercut_volume_mm3", 0.0);
+      row["contacts"] = rep["contacts"].size();
+      row["axis_limit_violations"] = rep["axis_limit_violations"].size();
+      row["threads"] = threads;
+      rows.push_back(row);
+      std::printf("%-16s %8d %8d %8.3g %12lld %8.3f %7.0f %9.0f %10.3g %6.2f %11.6g %11.4g %11.4g %8zu %6zu\n",
+                  c.c_str(), rep["blocks"].get<int>(), rep["moves"].get<int>(), rep["voxel_size_mm"].get<double>() * 1000,
+                  rep["active_voxels"].get<long long>(), wall, rep["peak_rss_mb"].get<double>(),
+                  row["moves_per_s"].get<double>(), vps, row["update_to_kernel"].get<double>(),
+                  rep["removed_volume_mm3"].get<double>(), row["overcut_mm3"].get<double>(),
+                  row["undercut_mm3"].get<double>(), rep["contacts"].size(), rep["axis_limit_violations"].size());
+      std::fflush(stdout);
+    }
+    std::error_code ec;
+    fs::remove_all(outdir, ec);
+    if (!a->json.empty()) io::write_file_atomic(a->json, rows.dump(2) + "\n");
+    return 0;
+  };
+}
+
+}  // namespace cutsim::app
