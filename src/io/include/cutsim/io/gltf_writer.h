@@ -18,8 +18,8 @@ struct GltfPart {
   const std::vector<std::array<float, 4>>* colors = nullptr;   ///< COLOR_0 per vertex, linear RGBA
   const std::vector<float>* deviation_mm = nullptr;              ///< _DEVIATION per vertex (custom attribute)
   /// The node's extras (contact markers: NC line, text, region, depth).
-  std::vector<std::pair<std::string, std::string>> extras_text;
-  std::vector<std::pair<std::string, double>> extras_number;
+  std::vector<std::pair<std::string, std::string>> extras_text = {};
+  std::vector<std::pair<std::string, double>> extras_number = {};
 };
 
 struct GltfOptions {
