@@ -227,7 +227,7 @@ TEST(Compare, SavedStockComparesAgainWithoutSimulating) {
   const auto target = write_stl(dir, slotted_block(), "target.stl");
   const auto p = dir.write("slot.nc", "G0 X-2 Y0 Z1\nG1 Z-0.105 F100\nG1 X3\nG1 Z-0.1\nG1 X8\nG0 Z1\n");
   std::string out, err;
-  ASSERT_EQ(run_cli("run " + p + " --tool flat:d=2 --stock-box 0,-2,-1,6,2,0 --voxel 0.005 --target " + target +
+  ASSERT_EQ(run_cli("run " + p + " --tool flat:d=2 --stock-box 0,-2,-1,6,2,0 --voxel 0.01 --target " + target +
                         " --format json --save-vdb -o " + dir.file("out"),
                     &out, &err),
             0)
