@@ -12,6 +12,7 @@
 #include "cutsim/io/atomic_file.h"
 #include "cutsim/io/job.h"
 #include "cutsim/io/mesh_io.h"
+#include "cutsim/sim/report.h"
 #include "cutsim/sim/simulate.h"
 #include "outputs.h"
 
@@ -92,14 +93,7 @@ Action add_compare_command(CLI::App& app) {
     j["machined"] = a->machined;
     j["target"] = a->target;
     j["voxel_size_mm"] = stock->voxel_mm();
-    j["overcut_volume_mm3"] = c.overcut_volume_mm3;
-    j["undercut_volume_mm3"] = c.undercut_volume_mm3;
-    j["overcut_volume_um3"] = c.overcut_volume_mm3 * 1e9;
-    j["undercut_volume_um3"] = c.undercut_volume_mm3 * 1e9;
-    j["max_overcut_mm"] = c.max_overcut_mm;
-    j["max_undercut_mm"] = c.max_undercut_mm;
-    j["tolerance_mm"] = c.tolerance_mm;
-    j["fraction_in_tolerance"] = c.fraction_in_tolerance;
+    for (const auto& [k, v] : sim::comparison_fields(c)) j[k] = v;
     j["defaults"] = note.empty() ? nlohmann::ordered_json::array() : nlohmann::ordered_json::array({note});
     j["outputs"] = {{"glb", glb}, {"report", rep}};
     const std::string json = j.dump(2) + "\n";
@@ -114,14 +108,7 @@ Action add_compare_command(CLI::App& app) {
       std::cout << json;
     } else {
       if (!note.empty()) std::cout << "note: " << note << "\n";
-      char buf[512];
-      std::snprintf(buf, sizeof buf,
-                    "target: overcut %.6g mm3 (%.4g um3), undercut %.6g mm3 (%.4g um3); max overcut %.3g um, max "
-                    "undercut %.3g um; %.1f %% of the surface within +-%.3g um\n",
-                    c.overcut_volume_mm3, c.overcut_volume_mm3 * 1e9, c.undercut_volume_mm3,
-                    c.undercut_volume_mm3 * 1e9, c.max_overcut_mm * 1e3, c.max_undercut_mm * 1e3,
-                    100 * c.fraction_in_tolerance, c.tolerance_mm * 1e3);
-      std::cout << buf << "wrote " << glb << "\nwrote " << rep << "\n";
+      std::cout << sim::comparison_text(c) << "wrote " << glb << "\nwrote " << rep << "\n";
     }
     return 0;
   };

@@ -13,6 +13,23 @@ nlohmann::json box_json(const Aabb& b) {
 }
 }  // namespace
 
+std::vector<std::pair<std::string, double>> comparison_fields(const compare::CompareResult& c) {
+  return {{"overcut_volume_mm3", c.overcut_volume_mm3},   {"undercut_volume_mm3", c.undercut_volume_mm3},
+          {"overcut_volume_um3", c.overcut_volume_mm3 * 1e9}, {"undercut_volume_um3", c.undercut_volume_mm3 * 1e9},
+          {"max_overcut_mm", c.max_overcut_mm},           {"max_undercut_mm", c.max_undercut_mm},
+          {"tolerance_mm", c.tolerance_mm},               {"fraction_in_tolerance", c.fraction_in_tolerance}};
+}
+
+std::string comparison_text(const compare::CompareResult& c) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf,
+                "target: overcut %.6g mm3 (%.4g um3), undercut %.6g mm3 (%.4g um3); max overcut %.3g um, max undercut "
+                "%.3g um; %.1f %% of the surface within +-%.3g um\n",
+                c.overcut_volume_mm3, c.overcut_volume_mm3 * 1e9, c.undercut_volume_mm3, c.undercut_volume_mm3 * 1e9,
+                c.max_overcut_mm * 1e3, c.max_undercut_mm * 1e3, 100 * c.fraction_in_tolerance, c.tolerance_mm * 1e3);
+  return buf;
+}
+
 std::string report_json(const SimResult& r, const ReportOutputs& out) {
   nlohmann::ordered_json j;
   const auto st = r.stock->stats();
@@ -53,17 +70,8 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
                   {"amplitude_mm", a.amplitude_mm}, {"limited_by", a.limited_by}});
   j["amplitude_limits"] = al;
   j["laser_scale"] = {{"applied", r.laser_error_applied}, {"max_error_um", r.max_laser_error_mm * 1000}};
-  if (r.comparison) {
-    const auto& c = *r.comparison;
-    j["overcut_volume_mm3"] = c.overcut_volume_mm3;
-    j["undercut_volume_mm3"] = c.undercut_volume_mm3;
-    j["overcut_volume_um3"] = c.overcut_volume_mm3 * 1e9;
-    j["undercut_volume_um3"] = c.undercut_volume_mm3 * 1e9;
-    j["max_overcut_mm"] = c.max_overcut_mm;
-    j["max_undercut_mm"] = c.max_undercut_mm;
-    j["tolerance_mm"] = c.tolerance_mm;
-    j["fraction_in_tolerance"] = c.fraction_in_tolerance;
-  }
+  if (r.comparison)
+    for (const auto& [k, v] : comparison_fields(*r.comparison)) j[k] = v;
   j["contact_tolerance_mm"] = r.contact_tolerance_mm;
   if (r.stopped_at_contact) j["stopped_at_contact"] = true;
   nlohmann::ordered_json cs = nlohmann::ordered_json::array();
@@ -101,15 +109,7 @@ std::string report_text(const SimResult& r, const ReportOutputs& out) {
                 r.stock->initial_volume_mm3(), r.stock->volume_mm3(), r.stock->removed_volume_mm3());
   os << buf;
   for (const auto& x : r.warnings) os << r.program << ":" << x.line << ": warning: " << x.message << "\n";
-  if (r.comparison) {
-    const auto& c = *r.comparison;
-    std::snprintf(buf, sizeof buf,
-                  "target: overcut %.6g mm3 (%.4g um3), undercut %.6g mm3 (%.4g um3); max overcut %.3g um, max undercut "
-                  "%.3g um; %.1f %% of the surface within +-%.3g um\n",
-                  c.overcut_volume_mm3, c.overcut_volume_mm3 * 1e9, c.undercut_volume_mm3, c.undercut_volume_mm3 * 1e9,
-                  c.max_overcut_mm * 1e3, c.max_undercut_mm * 1e3, 100 * c.fraction_in_tolerance, c.tolerance_mm * 1e3);
-    os << buf;
-  }
+  if (r.comparison) os << comparison_text(*r.comparison);
   const std::size_t shown = std::min<std::size_t>(r.axis_limit_violations.size(), 20);
   for (std::size_t i = 0; i < shown; ++i) {
     const auto& a = r.axis_limit_violations[i];

@@ -1,6 +1,8 @@
 #pragma once
 // The run report (JSON) and its console summary.
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "cutsim/sim/simulate.h"
 
@@ -18,6 +20,13 @@ struct ReportOutputs {
 /// active_voxels, leaf_nodes, warnings, defaults, outputs, timing_s
 /// {parse, simulate, export, total}, peak_rss_mb.
 std::string report_json(const SimResult& r, const ReportOutputs& out);
+
+/// The comparison's figures as report fields, in report order:
+/// overcut/undercut volumes (mm^3 and um^3), max overcut/undercut,
+/// tolerance_mm, fraction_in_tolerance. Shared by run and compare.
+std::vector<std::pair<std::string, double>> comparison_fields(const compare::CompareResult& c);
+/// The comparison's one-line summary (`target: overcut ...`), with newline.
+std::string comparison_text(const compare::CompareResult& c);
 
 /// A short human summary (several lines).
 std::string report_text(const SimResult& r, const ReportOutputs& out);
