@@ -66,7 +66,8 @@ Action add_compare_command(CLI::App& app) {
       machined = stock->surface_mesh(a->mesh_adaptivity);
     } else {
       machined = io::load_mesh(a->machined);
-      io::require_closed(machined, a->machined);
+      io::require_closed(machined, a->machined,
+                         "the machined mesh (a run's .glb is not one solid: compare its --save-vdb file)");
       double h = a->voxel;
       if (!(h > 0)) {
         h = machined.bounds().size().maxCoeff() / 1000;

@@ -380,17 +380,17 @@ MeshDefects find_defects(const TriMesh& m) {
   return d;
 }
 
-void require_closed(const TriMesh& m, const std::string& file) {
+void require_closed(const TriMesh& m, const std::string& file, const std::string& what) {
   const MeshDefects d = find_defects(m);
   if (!d.closed()) {
-    std::string msg = "the target mesh is not a closed, consistently oriented surface:";
+    std::string msg = what + " is not a closed, consistently oriented surface:";
     if (d.open_edges) msg += " " + std::to_string(d.open_edges) + " open edges";
     if (d.nonmanifold_edges) msg += " " + std::to_string(d.nonmanifold_edges) + " edges shared by more than two triangles";
     if (d.flipped_edges) msg += " " + std::to_string(d.flipped_edges) + " edges between triangles of opposite orientation";
     throw GeometryError(SourceLocation{file, 0, 0, {}}, msg);
   }
   if (!(m.signed_volume() > 0))
-    throw GeometryError(SourceLocation{file, 0, 0, {}}, "the target mesh encloses no volume (inside out?)");
+    throw GeometryError(SourceLocation{file, 0, 0, {}}, what + " encloses no volume (inside out?)");
 }
 
 }  // namespace cutsim::io

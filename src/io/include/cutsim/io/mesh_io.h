@@ -26,8 +26,8 @@ struct MeshDefects {
 /// Counts what keeps `m` from being a closed, consistently oriented surface.
 MeshDefects find_defects(const TriMesh& m);
 
-/// @throw GeometryError naming `file` and the defects when `m` is not
-///        closed and consistently oriented, or encloses no volume.
-void require_closed(const TriMesh& m, const std::string& file);
+/// @throw GeometryError naming `file`, `what` the mesh is and the defects
+///        when `m` is not closed and consistently oriented, or encloses no volume.
+void require_closed(const TriMesh& m, const std::string& file, const std::string& what = "the target mesh");
 
 }  // namespace cutsim::io
