@@ -48,7 +48,33 @@ Job load_job(const std::string& path) {
   const toml::table root = ctx.parse();
   Job job;
   job.source = path;
-  ctx.only_keys(root, {"program", "machine", "stock", "tool", "simulation", "target"}, "the job");
+  ctx.only_keys(root, {"program", "machine", "stock", "tool", "simulation", "target", "report"}, "the job");
+  if (auto* rt = root["report"].as_table()) {
+    ctx.only_keys(*rt, {"profile"}, "[report]");
+    if (auto* pv = rt->get("profile")) {
+      auto* pt = pv->as_table();
+      if (!pt) ctx.fail(pv->source(), "[report] profile must be a table { along, at, from, to, step }");
+      ctx.only_keys(*pt, {"along", "at", "from", "to", "step"}, "[report] profile");
+      ProfileSpec ps;
+      auto need = [&](const char* key) -> const toml::node& {
+        if (auto* n = pt->get(key)) return *n;
+        ctx.fail(pv->source(), std::string("[report] profile needs '") + key + "'");
+      };
+      const auto along = need("along").value<std::string>();
+      if (!along || (*along != "x" && *along != "y"))
+        ctx.fail(need("along").source(), "[report] profile along must be \"x\" or \"y\"");
+      ps.along = (*along)[0];
+      ps.at = ctx.number(need("at"), "[report] profile at");
+      ps.from = ctx.number(need("from"), "[report] profile from");
+      ps.to = ctx.number(need("to"), "[report] profile to");
+      ps.step = ctx.number(need("step"), "[report] profile step");
+      if (!(ps.step > 0) || !(ps.to > ps.from) || (ps.to - ps.from) / ps.step > 1e6)
+        ctx.fail(pv->source(), "[report] profile needs from < to and 0 < step, at most 1e6 samples");
+      job.profile = ps;
+    }
+  } else if (root.contains("report")) {
+    ctx.fail(root.get("report")->source(), "[report] must be a table");
+  }
   if (auto* tt = root["target"].as_table()) {
     ctx.only_keys(*tt, {"file", "offset", "rotate_deg", "scale", "tolerance_mm"}, "[target]");
     const auto dir = std::filesystem::path(path).parent_path();

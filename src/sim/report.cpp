@@ -1,5 +1,7 @@
 #include "cutsim/sim/report.h"
 
+#include <cctype>
+#include <cmath>
 #include <cstdio>
 #include <sstream>
 
@@ -70,6 +72,14 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
                   {"amplitude_mm", a.amplitude_mm}, {"limited_by", a.limited_by}});
   j["amplitude_limits"] = al;
   j["laser_scale"] = {{"applied", r.laser_error_applied}, {"max_error_um", r.max_laser_error_mm * 1000}};
+  if (r.profile) {
+    const Profile& p = *r.profile;
+    nlohmann::ordered_json h = nlohmann::ordered_json::array();
+    for (double z : p.height_mm) h.push_back(std::isfinite(z) ? nlohmann::ordered_json(z) : nlohmann::ordered_json());
+    j["profile"] = {{"along", std::string(1, p.spec.along)}, {"at_mm", p.spec.at}, {"from_mm", p.spec.from},
+                    {"to_mm", p.spec.to}, {"step_mm", p.spec.step}, {"pv_um", p.pv_mm * 1000},
+                    {"pv_detrended_um", p.pv_detrended_mm * 1000}, {"height_mm", h}};
+  }
   if (r.comparison)
     for (const auto& [k, v] : comparison_fields(*r.comparison)) j[k] = v;
   j["contact_tolerance_mm"] = r.contact_tolerance_mm;
@@ -110,6 +120,13 @@ std::string report_text(const SimResult& r, const ReportOutputs& out) {
   os << buf;
   for (const auto& x : r.warnings) os << r.program << ":" << x.line << ": warning: " << x.message << "\n";
   if (r.comparison) os << comparison_text(*r.comparison);
+  if (r.profile) {
+    const Profile& p = *r.profile;
+    std::snprintf(buf, sizeof buf, "profile along %c at %c = %g mm: form error PV %.1f nm (%.1f nm without the tilt), %zu samples\n",
+                  std::toupper(p.spec.along), p.spec.along == 'x' ? 'Y' : 'X', p.spec.at, p.pv_mm * 1e6,
+                  p.pv_detrended_mm * 1e6, p.height_mm.size());
+    os << buf;
+  }
   const std::size_t shown = std::min<std::size_t>(r.axis_limit_violations.size(), 20);
   for (std::size_t i = 0; i < shown; ++i) {
     const auto& a = r.axis_limit_violations[i];

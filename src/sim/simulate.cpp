@@ -1,5 +1,6 @@
 #include "cutsim/sim/simulate.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -405,8 +406,46 @@ SimResult simulate(const SimOptions& opt) {
   }
   res.contacts = checker.contacts();
   res.max_laser_error_mm = planner.max_laser_error_mm();
+  if (opt.job.profile) res.profile = measure_profile(*res.stock, res.stock_box, *opt.job.profile);
   res.timing.simulate_s = seconds_since(t_sim);
   return res;
+}
+
+Profile measure_profile(const stock::Stock& stock, const Aabb& stock_box, const io::ProfileSpec& spec) {
+  Profile p;
+  p.spec = spec;
+  const auto n = static_cast<std::size_t>(std::floor((spec.to - spec.from) / spec.step + 1e-9)) + 1;
+  std::vector<double> s, z;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double u = spec.from + static_cast<double>(i) * spec.step;
+    const double h = spec.along == 'x' ? stock.surface_height(u, spec.at, stock_box.max.z() + stock.voxel_mm())
+                                       : stock.surface_height(spec.at, u, stock_box.max.z() + stock.voxel_mm());
+    p.position_mm.push_back(u);
+    p.height_mm.push_back(h);
+    if (std::isfinite(h)) {
+      s.push_back(u);
+      z.push_back(h);
+    }
+  }
+  if (z.empty()) return p;
+  const auto [lo, hi] = std::minmax_element(z.begin(), z.end());
+  p.pv_mm = *hi - *lo;
+  // Least-squares line through the heights.
+  double ms = 0, mz = 0;
+  for (std::size_t i = 0; i < s.size(); ++i) ms += s[i], mz += z[i];
+  ms /= static_cast<double>(s.size());
+  mz /= static_cast<double>(s.size());
+  double sxx = 0, sxz = 0;
+  for (std::size_t i = 0; i < s.size(); ++i) sxx += (s[i] - ms) * (s[i] - ms), sxz += (s[i] - ms) * (z[i] - mz);
+  const double slope = sxx > 0 ? sxz / sxx : 0;
+  double rlo = 1e300, rhi = -1e300;
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    const double r = z[i] - mz - slope * (s[i] - ms);
+    rlo = std::min(rlo, r);
+    rhi = std::max(rhi, r);
+  }
+  p.pv_detrended_mm = rhi - rlo;
+  return p;
 }
 
 }  // namespace cutsim::sim

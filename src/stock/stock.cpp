@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 #include <atomic>
 #include <mutex>
@@ -212,6 +213,14 @@ Stock::~Stock() = default;
 Stock::Stock(Stock&&) noexcept = default;
 Stock& Stock::operator=(Stock&&) noexcept = default;
 
+namespace {
+// Squared distance from p to the box (0 inside).
+double box_distance2(const Aabb& b, const Vec3& p) {
+  const Vec3 d = (b.min - p).cwiseMax(p - b.max).cwiseMax(0.0);
+  return d.squaredNorm();
+}
+}  // namespace
+
 void Stock::subtract(const sweep::Sweep& sw) {
   Impl& m = *impl_;
   if (sw.prims.empty() || sw.bounds.empty()) return;
@@ -259,6 +268,7 @@ void Stock::subtract(const sweep::Sweep& sw) {
   const bool single = sw.prims.size() == 1;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
     std::vector<const sweep::Primitive*> cand;
+    std::vector<Aabb> cbox;
     if (interrupted()) return;  // the run is abandoned; stop quickly
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       LeafT* leaf = leaves[i];
@@ -266,9 +276,28 @@ void Stock::subtract(const sweep::Sweep& sw) {
       const Vec3 lmin = m.origin + m.h * Vec3(o.x(), o.y(), o.z());
       const Aabb lbox{lmin, lmin + Vec3::Constant(m.h * (kLeafDim - 1))};
       cand.clear();
+      cbox.clear();
       for (const auto& p : sw.prims)
-        if (single || sweep::bounds(p).expanded(g).overlaps(lbox)) cand.push_back(&p);
+        if (single || sweep::bounds(p).expanded(g).overlaps(lbox)) {
+          cand.push_back(&p);
+          cbox.push_back(sweep::bounds(p));
+        }
       if (cand.empty()) continue;
+      // Nearest pieces first: the running minimum then lets most of the
+      // others be skipped on their boxes.
+      if (cand.size() > 1) {
+        const Vec3 lc = lbox.center();
+        std::vector<std::size_t> order(cand.size());
+        for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+        std::vector<double> key(cand.size());
+        for (std::size_t k = 0; k < key.size(); ++k) key[k] = box_distance2(cbox[k], lc);
+        std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key[a] < key[b]; });
+        std::vector<const sweep::Primitive*> c2(cand.size());
+        std::vector<Aabb> b2(cand.size());
+        for (std::size_t k = 0; k < order.size(); ++k) c2[k] = cand[order[k]], b2[k] = cbox[order[k]];
+        cand.swap(c2);
+        cbox.swap(b2);
+      }
       const bool partial = !m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
       bool air = true;
       std::uint64_t evaluated = 0;
@@ -277,8 +306,17 @@ void Stock::subtract(const sweep::Sweep& sw) {
         float v = *it;
         if (v < m.gamma && !(partial && !m.roi_index.isInside(c))) {
           const Vec3 p = m.origin + m.h * Vec3(c.x(), c.y(), c.z());
+          // Only d < -v changes the voxel; a piece whose box is farther
+          // than that (or than the nearest piece so far) cannot matter.
           double d = std::numeric_limits<double>::infinity();
-          for (const auto* q : cand) d = std::min(d, sweep::distance(*q, p));
+          const double need = -static_cast<double>(v);
+          for (std::size_t k = 0; k < cand.size(); ++k) {
+            const double thr = std::min(d, need);
+            const double b2 = box_distance2(cbox[k], p);
+            if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
+            d = std::min(d, sweep::distance(*cand[k], p));
+            if (d <= -g) break;  // clamped to air whatever the rest
+          }
           ++evaluated;
           if (-d > v) {
             v = static_cast<float>(std::min(-d, g));

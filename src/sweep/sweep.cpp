@@ -13,7 +13,7 @@ double clamp01(double t) { return t < 0 ? 0 : (t > 1 ? 1 : t); }
 double seg_dist2(double px, double py, double bx, double by) {
   const double bb = bx * bx + by * by;
   const double t = bb > 0 ? clamp01((px * bx + py * by) / bb) : 0.0;
-  return std::hypot(px - t * bx, py - t * by);
+  return hypot2(px - t * bx, py - t * by);
 }
 
 double seg_dist3(const Vec3& p, const Vec3& a, const Vec3& b) {
@@ -70,7 +70,7 @@ double linear_distance(const LinearPrim& lp, const Vec3& x) {
   switch (lp.kind) {
     case LinearPrim::Case::vertical: {
       const double zlo = std::min(0.0, d.z()), zhi = std::max(0.0, d.z()) + e.core_length;
-      const double a = std::hypot(p.x(), p.y()) - e.disk_radius;
+      const double a = hypot2(p.x(), p.y()) - e.disk_radius;
       const double b = std::max(zlo - p.z(), p.z() - zhi);
       core = prism_sd(a, b);
       break;
@@ -90,7 +90,7 @@ double linear_distance(const LinearPrim& lp, const Vec3& x) {
       // over s of the distance to the translated cylinder (convex in s).
       const double r = e.disk_radius, L = e.core_length;
       auto cyl = [&](double s) {
-        const double a = std::hypot(p.x() - s * d.x(), p.y() - s * d.y()) - r;
+        const double a = hypot2(p.x() - s * d.x(), p.y() - s * d.y()) - r;
         const double b = std::max(s * d.z() - p.z(), p.z() - s * d.z() - L);
         return prism_sd(a, b);
       };
@@ -107,7 +107,7 @@ double linear_distance(const LinearPrim& lp, const Vec3& x) {
 
 double arc_distance(const ArcPrim& ap, const Vec3& x) {
   const double px = x.x() - ap.centre.x(), py = x.y() - ap.centre.y();
-  const double rho = std::hypot(px, py);
+  const double rho = hypot2(px, py);
   const double two_pi = 2 * kPi;
   bool in_range = std::fabs(ap.sweep_angle) >= two_pi;
   if (!in_range) {
@@ -122,8 +122,8 @@ double arc_distance(const ArcPrim& ap, const Vec3& x) {
     hd = std::fabs(rho - ap.radius);
   } else {
     const double a0 = ap.start_angle, a1 = ap.start_angle + ap.sweep_angle;
-    hd = std::min(std::hypot(px - ap.radius * std::cos(a0), py - ap.radius * std::sin(a0)),
-                  std::hypot(px - ap.radius * std::cos(a1), py - ap.radius * std::sin(a1)));
+    hd = std::min(hypot2(px - ap.radius * std::cos(a0), py - ap.radius * std::sin(a0)),
+                  hypot2(px - ap.radius * std::cos(a1), py - ap.radius * std::sin(a1)));
   }
   const double a = hd - ap.env.disk_radius;
   const double z = x.z() - ap.centre.z();
@@ -156,7 +156,7 @@ LinearPrim make_linear(const Vec3& base0, const Vec3& base1, const tool::Revolve
   lp.env = env;
   const Vec3& d = lp.d_local;
   const double len = d.norm();
-  const double h = std::hypot(d.x(), d.y());
+  const double h = hypot2(d.x(), d.y());
   if (h <= 1e-12 * std::max(len, 1.0)) lp.kind = LinearPrim::Case::vertical;
   else if (std::fabs(d.z()) <= 1e-12 * len) lp.kind = LinearPrim::Case::horizontal;
   else if (env.disk_radius == 0) lp.kind = LinearPrim::Case::parallelogram;
@@ -179,8 +179,8 @@ double profile_distance(const ProfilePrim& pp, const Vec3& x) {
     const double y = p.y() - s * d.y(), z = p.z() - s * d.z();
     double gy = 0, gz = 0;
     const double a2 = tool::profile_distance_2d(e, y, z, &gy, &gz);
-    const double f2 = ax / std::hypot(ax, gy * d.y() + gz * d.z());
-    const double fc = ax / std::hypot(ax, d.z());
+    const double f2 = ax / hypot2(ax, gy * d.y() + gz * d.z());
+    const double fc = ax / hypot2(ax, d.z());
     const double a = std::max(a2 * f2, (z - e.height) * fc);
     const double b = d.x() > 0 ? std::max(-p.x(), p.x() - d.x()) : std::max(p.x(), d.x() - p.x());
     return prism_sd(a, b);
@@ -190,7 +190,7 @@ double profile_distance(const ProfilePrim& pp, const Vec3& x) {
     const double y = p.y() - s * d.y(), z = p.z() - s * d.z();
     return std::max(std::max(tool::profile_distance_2d(e, y, z), z - e.height), 0.0);
   });
-  return std::hypot(p.x(), a);
+  return hypot2(p.x(), a);
 }
 
 Eigen::Matrix3d turn_z(double c, double s) {

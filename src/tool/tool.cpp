@@ -71,7 +71,7 @@ Aabb turned_box(const EdgeProfile& e, double x0, double x1, double y0, double y1
 struct Visit {
   const Vec3& p;
   double operator()(const RevolvedEnvelope& e) const {
-    const double a = std::hypot(p.x(), p.y()) - e.disk_radius;
+    const double a = hypot2(p.x(), p.y()) - e.disk_radius;
     const double b = std::max(e.core_offset - p.z(), p.z() - e.core_offset - e.core_length);
     return prism_sd(a, b) - e.corner_radius;
   }
@@ -79,7 +79,7 @@ struct Visit {
     const double xc = e.cos_o * p.x() + e.sin_o * p.y();
     const double yc = -e.sin_o * p.x() + e.cos_o * p.y();
     const double a = std::max(profile_distance_2d(e, yc, p.z()), p.z() - e.height);
-    return std::hypot(xc, std::max(a, 0.0));
+    return hypot2(xc, std::max(a, 0.0));
   }
   double operator()(const FlankBody& f) const {
     const EdgeProfile& e = f.edge;
@@ -90,7 +90,7 @@ struct Visit {
     return std::max(std::max(flank, rake), std::max(-f.length - xc, p.z() - e.height));
   }
   double operator()(const SwingTorus& t) const {
-    return std::hypot(std::hypot(p.x(), p.z() - t.swing) - (t.swing - t.nose_radius), p.y()) - t.nose_radius;
+    return hypot2(hypot2(p.x(), p.z() - t.swing) - (t.swing - t.nose_radius), p.y()) - t.nose_radius;
   }
 };
 
@@ -101,7 +101,7 @@ double profile_distance_2d(const EdgeProfile& e, double y, double z, double* gy,
   const double sb = std::sin(e.half_angle), cb = std::cos(e.half_angle);
   double d, ga, gb;
   if (a * sb + b * cb <= 0) {  // nearest to the apex of the wedge
-    d = std::hypot(a, b);
+    d = hypot2(a, b);
     ga = d > 0 ? a / d : 0;
     gb = d > 0 ? b / d : -1;
   } else {

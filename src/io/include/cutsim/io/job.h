@@ -12,6 +12,14 @@
 
 namespace cutsim::io {
 
+/// A line of surface heights for the report ([report] profile): the machined
+/// top sampled along X or Y at a fixed value of the other axis.
+struct ProfileSpec {
+  char along = 'y';        ///< 'x' or 'y'
+  double at = 0;           ///< the other coordinate, mm
+  double from = 0, to = 0, step = 0;  ///< mm along `along`
+};
+
 struct Job {
   std::string source;                ///< job file path, empty if none
   std::optional<Aabb> stock_box;     ///< [stock] box = [xmin,ymin,zmin,xmax,ymax,zmax], mm
@@ -34,6 +42,7 @@ struct Job {
   Vec3 target_rotate_deg = Vec3::Zero();         ///< [target] rotate_deg: about X, then Y, then Z
   double target_scale = 1.0;                     ///< [target] scale: file units to mm (0.001 for um)
   std::optional<double> tolerance_mm;            ///< [target] tolerance_mm
+  std::optional<ProfileSpec> profile;            ///< [report] profile = { along, at, from, to, step }
 };
 
 /// Reads a job file.

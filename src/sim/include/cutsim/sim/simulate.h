@@ -67,6 +67,17 @@ struct Timing {
   double contact_check_s = 0; ///< part of simulate_s: testing the non-cutting regions
 };
 
+/// Surface heights of the machined top along a line ([report] profile).
+struct Profile {
+  io::ProfileSpec spec;
+  std::vector<double> position_mm, height_mm;  ///< NaN where the line finds no surface
+  double pv_mm = 0;            ///< peak to valley of the heights found
+  double pv_detrended_mm = 0;  ///< after taking out the least-squares line (the tilt)
+};
+
+/// Samples `stock` along `spec` from above the stock's top.
+Profile measure_profile(const stock::Stock& stock, const Aabb& stock_box, const io::ProfileSpec& spec);
+
 struct SimResult {
   std::string program;
   int blocks = 0;        ///< blocks with words
@@ -96,6 +107,7 @@ struct SimResult {
   std::vector<Contact> contacts;                ///< non-cutting regions in the material
   double contact_tolerance_mm = 0;              ///< contacts shallower than this are not recorded
   bool stopped_at_contact = false;              ///< stop_at_first_contact ended the run
+  std::optional<Profile> profile;               ///< [report] profile
 };
 
 /// The target mesh from a file, placed in the workpiece frame (scale, then
