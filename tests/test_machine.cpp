@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "cutsim/core/error.h"
+#include "cutsim/cases/cases.h"
 #include "cutsim/machine/environment.h"
 #include "cutsim/machine/kinematics.h"
 #include "cutsim/sim/planner.h"
@@ -235,75 +236,10 @@ TEST(LaserScale, PressureRiseDeepensALaterCutByTheEdlenError) {
   EXPECT_NEAR(off.second - off.first, 0.0, 0.0005);
 }
 
-// seeds/002: 1 x 2 concave spherical lens array (R 300 mm, aperture 18 mm,
-// centres at X -7.5 and +7.5) turned on the xzc lathe, spindle 120 rpm,
-// 120 points a revolution (G93: 1/240 s a block), nose radius 0.9789 mm.
-struct Lens {
-  static constexpr double R = 300, half_aperture = 9, nose = 0.9789;
-  static double sag(double rho2) { return R - std::sqrt(R * R - rho2); }
-  // Surface height and the index of the piece in contact (0, 1 lenses; 2 flat).
-  static double z(double x, double y, int* piece, Vec3* normal) {
-    const double s0 = sag(half_aperture * half_aperture);
-    double best = 0;
-    int which = 2;
-    Vec3 n = Vec3::UnitZ();
-    for (int i = 0; i < 2; ++i) {
-      const double cx = i == 0 ? -7.5 : 7.5;
-      const double r2 = (x - cx) * (x - cx) + y * y;
-      const double zi = sag(r2) - s0;
-      if (zi < best) {
-        best = zi;
-        which = i;
-        const double k = 1 / std::sqrt(R * R - r2);
-        n = Vec3(-(x - cx) * k, -y * k, 1).normalized();
-      }
-    }
-    if (piece) *piece = which;
-    if (normal) *normal = n;
-    return best;
-  }
-};
-
+// seeds/002's lens array: the programs come from the reference case's
+// generator (src/cases/lens.cpp), here at 50 um a revolution to stay short.
 std::string sts_program(bool normal_compensation, std::vector<int>* edge_lines, double rpm) {
-  std::ostringstream os;
-  os << std::fixed;
-  os.precision(8);
-  os << "G21 G90\nG0 X16.5 Z1 C0\nG93\n";
-  int line = 4, prev_piece = -1;
-  const double feed_per_rev = 0.05;
-  const int per_rev = 120;
-  const int revs = static_cast<int>(16.5 / feed_per_rev);
-  for (int k = 0; k <= revs * per_rev; ++k) {
-    const double theta = k * 2 * kPi / per_rev;
-    const double rho = 16.5 - feed_per_rev * k / per_rev;
-    const double x = rho * std::cos(theta), y = rho * std::sin(theta);
-    int piece;
-    Vec3 n;
-    const double zs = Lens::z(x, y, &piece, &n);
-    double X, Z;
-    if (normal_compensation) {
-      // The nose centre on the surface normal; X takes its radial part.
-      const Vec3 c = Vec3(x, y, zs) + Lens::nose * n;
-      X = std::hypot(c.x(), c.y());
-      Z = c.z() - Lens::nose;
-    } else {
-      // Keep X steady: the nose circle lowered onto the surface in the
-      // radial section, all compensation on Z.
-      double zc = -1e9;
-      for (int i = -100; i <= 100; ++i) {
-        const double d = Lens::nose * i / 100.0;
-        zc = std::max(zc, Lens::z((rho + d) * std::cos(theta), (rho + d) * std::sin(theta), nullptr, nullptr) +
-                              std::sqrt(Lens::nose * Lens::nose - d * d));
-      }
-      X = rho;
-      Z = zc - Lens::nose;
-    }
-    if (prev_piece >= 0 && piece != prev_piece && edge_lines) edge_lines->push_back(line);
-    prev_piece = piece;
-    os << "G1 X" << X << " Z" << Z << " C" << theta / kDeg << " F" << rpm * per_rev << "\n";
-    ++line;
-  }
-  return os.str();
+  return cases::lens::program(normal_compensation, rpm, 0.05, 120, edge_lines);
 }
 
 // X acceleration is estimated block by block (README): at the CASES.md
@@ -330,8 +266,10 @@ TEST(SlowToolServo, NormalCompensationPeaksInXAtLensEdges) {
           << "line " << v.line;
     }
   EXPECT_NEAR(peak, 1862, 50);
-  // 1 + 330 * 120 blocks of 1/240 s after a rapid of 16.5 mm at 200 mm/s.
-  EXPECT_NEAR(a.program_time_s, (1 + 330 * 120) / 240.0 + 16.5 / 200, 1e-9);
+  // 1 + 330 * 120 blocks of 1/240 s after a rapid of 16.5 mm at 200 mm/s
+  // and a 1 mm approach at 60 mm/min; the retract from about the surface at
+  // the centre (where the lenses overlap) to Z1 at 200 mm/s.
+  EXPECT_NEAR(a.program_time_s, (1 + 330 * 120) / 240.0 + 16.5 / 200 + 1.0 + (1 - cases::lens::z(0, 0)) / 200, 1e-5);
 }
 
 TEST(SlowToolServo, AtSpeedNormalCompensationExceedsXLimitAtLensEdgesKeepXSteadyDoesNot) {

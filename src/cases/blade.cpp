@@ -177,7 +177,7 @@ TriMesh target_mesh(const std::vector<Outline>& o) {
 // at least its tip path over the feed and each joint's travel over its
 // velocity limit (with margin); durations then grow until the change of
 // joint velocity between blocks stays within the acceleration limit, as
-// cutsim's axis check estimates it.
+// cutsim's axis check estimates it (over the mean of the blocks' durations).
 std::vector<double> block_times(const std::vector<machine::JointValues>& q, const std::vector<double>& path_mm,
                                 double feed_mm_s, const machine::Machine& mc) {
   const std::size_t n = path_mm.size();
@@ -190,19 +190,24 @@ std::vector<double> block_times(const std::vector<machine::JointValues>& q, cons
       if (j->max_velocity > 0) t[i] = std::max(t[i], std::abs(q[i + 1][k] - q[i][k]) / (0.8 * j->max_velocity));
     t[i] = std::max(t[i], 1e-4);
   }
-  for (int iter = 0; iter < 10000; ++iter) {
+  // Junction i joins block i - 1 and block i; the path starts and ends at
+  // rest (a block of zero travel and duration t[0] / t[n-1] outside).
+  auto velocity = [&](std::size_t b, int k) { return (q[b + 1][k] - q[b][k]) / t[b]; };
+  for (int iter = 0;; ++iter) {
     bool changed = false;
-    for (std::size_t i = 0; i + 1 < n; ++i)
+    for (std::size_t i = 0; i <= n; ++i)
       for (const auto& [k, j] : joints) {
         if (j->max_acceleration <= 0) continue;
         const double a = 0.8 * j->max_acceleration;
-        const double d0 = q[i + 1][k] - q[i][k], d1 = q[i + 2][k] - q[i + 1][k];
-        if (std::abs(d1 / t[i + 1] - d0 / t[i]) <= a * 0.5 * (t[i] + t[i + 1])) continue;
-        t[i] *= 1.05;
-        t[i + 1] *= 1.05;
+        const double v0 = i > 0 ? velocity(i - 1, k) : 0.0, v1 = i < n ? velocity(i, k) : 0.0;
+        const double span = 0.5 * ((i > 0 ? t[i - 1] : t[0]) + (i < n ? t[i] : t[n - 1]));
+        if (std::abs(v1 - v0) <= a * span) continue;
+        if (i > 0) t[i - 1] *= 1.03;
+        if (i < n) t[i] *= 1.03;
         changed = true;
       }
     if (!changed) break;
+    if (iter > 100000) throw GeometryError({}, "blade: the finishing feed does not settle within the axis limits");
   }
   return t;
 }
@@ -308,7 +313,7 @@ std::string program(const std::vector<Outline>& o, bool with_comment_of_errors) 
   }
   const std::vector<double> t = block_times(q, path, 300.0 / 60, mc);
   os << "(finishing: " << pts.size() << " points, tilt " << f(kTilt) << " deg, 0.05 mm a level)\n"
-     << "G0 B" << f(kTilt) << " C" << f(rad_to_deg(pts[0].c), 5) << "\nG43.4 H1\n"
+     << "G0 B" << f(kTilt) << " C" << f(rad_to_deg(pts[0].c), 5) << "\nG43.4 H0\n"
      << "G0 X" << f(pts[0].tip.x()) << " Y" << f(pts[0].tip.y()) << " Z" << f(safe) << "\n"
      << "G1 Z" << f(pts[0].tip.z()) << " F100.\nG93\n";
   for (std::size_t i = 1; i < pts.size(); ++i)

@@ -69,8 +69,13 @@ std::vector<File> fouraxis_files() {
   for (int i = 0; i <= 400; ++i) xs.push_back(0.05 * i);
   for (int i = 0; i <= 240; ++i) {
     const double z = -6 + 0.05 * i;
-    zs.push_back(z);
-    if (std::abs(std::abs(z) - 5) < 1e-9) zs.push_back(z + 1e-4);  // the step at z = +-5, near vertical
+    if (std::abs(std::abs(z) - 5) > 1e-9) {
+      zs.push_back(z);
+      continue;
+    }
+    // The steps at z = -5 and +5: two rows 0.1 um apart, a near-vertical wall.
+    zs.push_back(z < 0 ? -5.00005 : 4.99995);
+    zs.push_back(z < 0 ? -4.99995 : 5.00005);
   }
   TriMesh m = height_field_solid(xs, zs, [](double x, double z) { return -y_lo(x, z); }, -24);
   for (Vec3& p : m.positions) p = Vec3(p.x(), -p.z(), p.y());

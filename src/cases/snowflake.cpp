@@ -114,11 +114,14 @@ std::string program() {
     const double y = j * kPick;
     const double xe = std::sqrt(kRim * kRim - y * y) + kDx;
     const int n = static_cast<int>(std::ceil(2 * xe / kDx));
+    std::vector<double> raw;
+    for (int i = 0; i <= n; ++i) raw.push_back(drop_v(-xe + 2 * xe * i / n, y));
+    // Each point at least as high as its neighbours: a straight move between
+    // two samples then never dips into a wall that rises between them (the
+    // crystal's outline is vertical); it leaves up to kDx of it instead.
     auto& d = drop[j + lines];
-    for (int i = 0; i <= n; ++i) {
-      const double x = -xe + 2 * xe * i / n;
-      d.emplace_back(x, drop_v(x, y));
-    }
+    for (int i = 0; i <= n; ++i)
+      d.emplace_back(-xe + 2 * xe * i / n, std::max({raw[i], raw[std::max(i - 1, 0)], raw[std::min(i + 1, n)]}));
   }
   for (int layer = 1; layer <= layers; ++layer) {
     const double zl = -layer * kLayer;

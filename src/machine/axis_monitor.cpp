@@ -48,7 +48,10 @@ void AxisMonitor::flag(std::size_t j, int line, const std::shared_ptr<const std:
   out_.push_back(std::move(a));
 }
 
-void AxisMonitor::step(const JointValues& q, double dt, bool feed, int line, const std::shared_ptr<const std::string>& text) {
+void AxisMonitor::step(const JointValues& q, double dt, bool feed, int line, const std::shared_ptr<const std::string>& text,
+                       double block_dt, bool first) {
+  if (block_dt < 0) block_dt = dt;
+  const double span = first ? 0.5 * (block_dt + block_dt_prev_) : 0.5 * (dt + dt_prev_);
   for (std::size_t j = 0; j < m_.chain.size(); ++j) {
     const Joint& jt = m_.chain[j];
     const std::size_t i = static_cast<std::size_t>(axis_index(jt.axis));
@@ -59,7 +62,7 @@ void AxisMonitor::step(const JointValues& q, double dt, bool feed, int line, con
     if (feed && jt.max_velocity > 0 && std::fabs(v) > jt.max_velocity * (1 + 1e-9))
       flag(j, line, text, "velocity", v, jt.max_velocity);
     if (feed && moving_ && jt.max_acceleration > 0) {
-      const double a = (v - v_[j]) / (0.5 * (dt + dt_prev_));
+      const double a = (v - v_[j]) / span;
       if (std::fabs(a) > jt.max_acceleration * (1 + 1e-9)) flag(j, line, text, "acceleration", a, jt.max_acceleration);
     }
     v_[j] = feed ? v : 0.0;
@@ -70,6 +73,7 @@ void AxisMonitor::step(const JointValues& q, double dt, bool feed, int line, con
   }
   q_ = q;
   dt_prev_ = dt;
+  block_dt_prev_ = block_dt;
   moving_ = feed && dt > 0;
 }
 

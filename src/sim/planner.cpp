@@ -172,7 +172,7 @@ void Planner::monitor(const motion::Move& m, const PlannedMove& p, machine::Axis
       const Vec3 x = m.point_at(s);
       q[0] = x.x(); q[1] = x.y(); q[2] = x.z();
     }
-    mon.step(q, dt, feed, m.line, m.text);
+    mon.step(q, dt, feed, m.line, m.text, p.t1 - p.t0, k == 1);
   }
   if (!feed) mon.rest();
 }

@@ -39,8 +39,13 @@ AmplitudeLimit amplitude_limit(const Joint& j, double frequency_hz);
 class AxisMonitor {
 public:
   AxisMonitor(const Machine& m, const JointValues& start);
-  /// The joints reach `q` after `dt` seconds of NC line `line`.
-  void step(const JointValues& q, double dt, bool feed, int line, const std::shared_ptr<const std::string>& text);
+  /// The joints reach `q` after `dt` seconds of NC line `line`. A block may
+  /// come in several steps (arcs, TCP moves): `block_dt` is the whole
+  /// block's duration and `first` marks its first step, where the change of
+  /// velocity from the previous block is taken over the mean of the two
+  /// blocks' durations (between steps, over the steps').
+  void step(const JointValues& q, double dt, bool feed, int line, const std::shared_ptr<const std::string>& text,
+            double block_dt = -1, bool first = true);
   /// Joints at rest (a dwell, a tool change).
   void rest();
   const std::vector<AxisViolation>& violations() const { return out_; }
@@ -54,6 +59,7 @@ private:
   JointValues q_;
   std::vector<double> v_;
   double dt_prev_ = 0;
+  double block_dt_prev_ = 0;
   bool moving_ = false;
   std::vector<AxisViolation> out_;
   std::vector<double> revs_, turn_time_;
