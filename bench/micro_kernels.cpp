@@ -1,9 +1,12 @@
 // Google Benchmark micro-benchmarks of the hot kernels: the block reader,
-// sweep distances and the stock update.
+// sweep distances, the stock update and the deviation query.
 #include <benchmark/benchmark.h>
 
+#include <cmath>
 #include <sstream>
 
+#include "cutsim/cases/cases.h"
+#include "cutsim/compare/target.h"
 #include "cutsim/gcode/block_reader.h"
 #include "cutsim/motion/interpreter.h"
 #include "cutsim/stock/stock.h"
@@ -66,6 +69,28 @@ void BM_StockSubtractBallPass(benchmark::State& state) {
   state.counters["active_voxels"] = static_cast<double>(voxels);
 }
 BENCHMARK(BM_StockSubtractBallPass)->Arg(10)->Arg(5)->Unit(benchmark::kMillisecond);
+
+// The deviation query: signed distance to a target mesh at points near its
+// surface, as the comparison asks it at every machined vertex. The target is
+// a height field of 2 x range(0)^2 triangles (a wavy 1 x 1 mm face on a block).
+void BM_DeviationQuery(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  std::vector<double> xs;
+  for (int i = 0; i <= n; ++i) xs.push_back(static_cast<double>(i) / n);
+  const auto wave = [](double x, double y) { return 0.01 * std::sin(20 * x) * std::cos(15 * y); };
+  const compare::Target target(cases::height_field_solid(xs, xs, wave, -1));
+  std::uint64_t k = 0;
+  for (auto _ : state) {
+    // A low-discrepancy walk over the face, 1 um above or below it.
+    const double x = std::fmod(0.5 + 0.6180339887 * static_cast<double>(k), 1.0);
+    const double y = std::fmod(0.5 + 0.7548776662 * static_cast<double>(k), 1.0);
+    const double dz = (k & 1) ? 0.001 : -0.001;
+    benchmark::DoNotOptimize(target.signed_distance_within(Vec3(x, y, wave(x, y) + dz), 0.01));
+    ++k;
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_DeviationQuery)->Arg(100)->Arg(1000);
 
 }  // namespace
 

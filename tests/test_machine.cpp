@@ -347,5 +347,26 @@ TEST(FiveAxis, TurningBAtAFixedTipUnderTcpSweepsWithinTheStatedBound) {
   EXPECT_LT(worst, tol) << "worst deviation " << worst;
 }
 
+// Tool centre point control solves the joints with what the controller
+// knows, the nominal machine: a workpiece set 10 um off in X moves the tip
+// 10 um on the workpiece, as on a real machine (not compensated away).
+TEST(FiveAxis, TcpDoesNotCompensateTheSettingErrorsItDoesNotKnow) {
+  TempDir dir;
+  const auto p = dir.write("b.nc", "G21 G90\nG0 X0. Y0. Z5. B20. C40.\nG43.4 H0\nG1 X1. Y0.5 Z0.2 C60. F100.\n");
+  std::vector<motion::Move> moves;
+  sim::ProgramOptions popt;
+  popt.dialect = gcode::Dialect::fanuc;
+  sim::check_program(p, popt, {}, [&](const motion::Move& m) { moves.push_back(m); });
+  machine::Machine mc = machine::load_machine("xyzbc");
+  mc.workpiece_setting = sim::parse_setting("dx=0.01", "test");
+  const machine::Kinematics kin(mc);
+  sim::Planner planner(kin, {}, {});
+  sim::PlannedMove last;
+  for (const auto& m : moves) last = planner.plan(m);
+  const Vec3 tip = planner.pose_at(moves.back(), last, 1.0).translation();
+  // W^-1 of a workpiece shifted +10 um in X: the tip lands 10 um lower in X.
+  EXPECT_NEAR((tip - Vec3(1 - 0.01, 0.5, 0.2)).norm(), 0, 1e-9) << tip.transpose();
+}
+
 }  // namespace
 }  // namespace cutsim::test

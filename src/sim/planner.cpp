@@ -9,7 +9,17 @@ namespace cutsim::sim {
 using machine::JointValues;
 using machine::JointType;
 
-Planner::Planner(const machine::Kinematics& kin, const motion::AxisValues&, Options opt) : kin_(kin), opt_(opt) {
+namespace {
+machine::Machine without_errors(machine::Machine m) {
+  for (auto& j : m.chain) j.error = machine::JointError{};
+  m.tool_setting = Pose::Identity();
+  m.workpiece_setting = Pose::Identity();
+  return m;
+}
+}  // namespace
+
+Planner::Planner(const machine::Kinematics& kin, const motion::AxisValues&, Options opt)
+    : kin_(kin), nominal_(without_errors(kin.machine())), opt_(opt) {
   if (opt_.environment && !opt_.environment->empty()) n_ref_ = opt_.environment->refractive_index(0.0);
   bool laser = false;
   for (const auto& j : kin_.machine().chain) laser |= j.laser.has_value();
@@ -34,8 +44,8 @@ PlannedMove Planner::plan(const motion::Move& m) {
                      "G53.1 tool axis control needs the rotary axes solved for the tool axis: not supported yet "
                      "(program the rotary axes)");
   if (m.tcp) {
-    p.q0 = kin_.solve_tip(m.start.xyz, p.q0);
-    p.q1 = kin_.solve_tip(m.end.xyz, p.q1);
+    p.q0 = nominal_.solve_tip(m.start.xyz, p.q0);
+    p.q1 = nominal_.solve_tip(m.end.xyz, p.q1);
   }
   double dt = 0;
   if (m.duration_s > 0) {
@@ -76,7 +86,7 @@ JointValues Planner::joints_at(const motion::Move& m, const PlannedMove& p, doub
   JointValues q;
   for (std::size_t i = 0; i < 6; ++i) q[i] = p.q0[i] + s * (p.q1[i] - p.q0[i]);
   if (m.tcp) {
-    q = kin_.solve_tip(m.point_at(s), q);
+    q = nominal_.solve_tip(m.point_at(s), q);
   } else if (m.is_arc()) {
     const Vec3 x = m.point_at(s);
     q[0] = x.x(); q[1] = x.y(); q[2] = x.z();
@@ -167,7 +177,7 @@ void Planner::monitor(const motion::Move& m, const PlannedMove& p, machine::Axis
     JointValues q;
     const double s = static_cast<double>(k) / steps;
     for (std::size_t i = 0; i < 6; ++i) q[i] = p.q0[i] + s * (p.q1[i] - p.q0[i]);
-    if (m.tcp) q = kin_.solve_tip(m.point_at(s), q);
+    if (m.tcp) q = nominal_.solve_tip(m.point_at(s), q);
     else if (m.is_arc()) {
       const Vec3 x = m.point_at(s);
       q[0] = x.x(); q[1] = x.y(); q[2] = x.z();

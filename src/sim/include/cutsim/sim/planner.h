@@ -59,6 +59,10 @@ private:
   machine::JointValues with_laser_error(machine::JointValues q, double t) const;
 
   const machine::Kinematics& kin_;
+  /// What the controller knows: the machine without its assembly and
+  /// setting errors. Tool centre point control solves the joints with it,
+  /// so the errors act on the tip as they do on a real machine.
+  machine::Kinematics nominal_;
   Options opt_;
   double time_ = 0;
   double n_ref_ = 1;
