@@ -137,6 +137,24 @@ TEST(Interference, ShankContactWhereABallMillPlungesPastItsFlutes) {
   EXPECT_TRUE(ok.contacts.empty());
 }
 
+// Moves are subtracted in batches; the check of a move must still see the
+// material the batch's earlier moves removed. A slot 0.5 deep (line 3),
+// then the tool goes down to 1.5 and back along it: the 0.8 mm shank above
+// the 1 mm flutes (whose envelope, domed, reaches 1.5 above the tip) stays
+// inside the 1 mm slot. Without the slot the same moves bury the shank.
+TEST(Interference, MovesOfOneBatchSeeTheMaterialTheEarlierOnesRemoved) {
+  TempDir dir;
+  const std::string tool = "ball:d=1,l=1,shank_d=0.8";
+  const Aabb box{Vec3(-2, -2, -2), Vec3(5, 2, 0)};
+  const auto r = run_with(dir, "G0 X0 Y0 Z1\nG1 Z-0.5 F100\nG1 X3\nG1 Z-1.5\nG1 X0\nG1 Z1\nM30\n", tool, box, 0.02);
+  EXPECT_TRUE(r.contacts.empty()) << r.contacts.size() << " contacts, the first on line " << r.contacts[0].line;
+  const auto bare = run_with(dir, "G0 X3 Y0 Z1\nG1 Z-0.5 F100\nG1 Z-1.5\nG1 X0\nG1 Z1\nM30\n", tool, box, 0.02);
+  ASSERT_FALSE(bare.contacts.empty());
+  bool line4 = false;
+  for (const auto& c : bare.contacts) line4 |= c.line == 4 && c.region == "shank";
+  EXPECT_TRUE(line4);
+}
+
 TEST(Interference, RapidThroughTheStockIsFlaggedAndARapidAboveIsNot) {
   TempDir dir;
   const std::string prog =

@@ -7,6 +7,9 @@
 // distance move the surface by a small fraction of a voxel. We allow
 // 0.05 h per mm^2 of cut surface: |V - V_exact| <= 0.05 * h * A_cut.
 #include <cmath>
+#include <map>
+#include <mutex>
+#include <tuple>
 
 #include "helpers.h"
 
@@ -117,6 +120,45 @@ TEST(Volume, CutOutsideTheRoiCornerOfABigBlockLeavesTheRestAnalytic) {
   EXPECT_NEAR(r.stock->removed_volume_mm3(), exact, 0.05 * h * area);
   EXPECT_DOUBLE_EQ(r.stock->initial_volume_mm3(), 50.0 * 50.0 * 10.0);
   EXPECT_LT(r.stock->roi().size().x(), 1.0);
+}
+
+// A batch subtracts the union of its sweeps: every voxel value equals the
+// one-move-at-a-time result, also when moves repeat and reverse (the
+// pathological case for the batch's bounds: identical pieces).
+TEST(Volume, BatchedSubtractEqualsMoveByMove) {
+  const Aabb box{Vec3(-1, -1, -1), Vec3(2, 2, 0)};
+  stock::StockOptions so;
+  so.voxel_mm = 0.02;
+  const tool::Tool t = tool::parse_tool_spec("ball:d=0.5", "test");
+  std::vector<sweep::Sweep> moves;
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  const Vec3 pts[] = {Vec3(0, 0, -0.1), Vec3(1, 0, -0.12), Vec3(1, 1, -0.1), Vec3(0, 0.5, -0.15), Vec3(0, 0, -0.1)};
+  for (int rep = 0; rep < 3; ++rep)
+    for (int i = 0; i + 1 < 5; ++i) moves.push_back(sweep::sweep_line(pts[i], pts[i + 1], I, t));
+  moves.push_back(sweep::sweep_line(pts[1], pts[0], I, t));  // reversed
+  stock::Stock one(box, box, so), batch(box, box, so);
+  for (const auto& m : moves) one.subtract(m);
+  batch.subtract(moves);
+  EXPECT_GT(one.removed_volume_mm3(), 0.05);
+  EXPECT_EQ(one.removed_volume_mm3(), batch.removed_volume_mm3());
+  std::mutex mu;
+  std::map<std::tuple<double, double, double>, std::vector<float>> a, b;
+  auto collect = [&](auto& out) {
+    return [&](const stock::VoxelBlock& vb) {
+      std::vector<float> v;
+      for (int x = 0; x < vb.n[0]; ++x)
+        for (int y = 0; y < vb.n[1]; ++y)
+          for (int z = 0; z < vb.n[2]; ++z) v.push_back(vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z]);
+      std::lock_guard<std::mutex> lock(mu);
+      out[{vb.first_center.x(), vb.first_center.y(), vb.first_center.z()}] = std::move(v);
+    };
+  };
+  one.for_each_roi_block(collect(a));
+  batch.for_each_roi_block(collect(b));
+  ASSERT_EQ(a.size(), b.size());
+  std::size_t differ = 0;
+  for (const auto& [k, v] : a) differ += v != b[k];
+  EXPECT_EQ(differ, 0u);
 }
 
 }  // namespace

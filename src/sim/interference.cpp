@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
 
 #include "cutsim/sweep/sweep.h"
 
@@ -22,7 +23,8 @@ double InterferenceChecker::pose_spacing(const tool::Tool& t, double voxel_mm) {
   return std::max(s, 2 * voxel_mm);
 }
 
-bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool) {
+bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
+                                const std::vector<sweep::Sweep>* pending) {
   const bool rapid = m.kind == motion::MotionKind::rapid;
   std::vector<tool::Region> regions = tool::contact_regions(tool);
   const tool::Shape cut = tool::cutting_shape(tool);
@@ -47,6 +49,7 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
   const int n = std::clamp(static_cast<int>(std::ceil(len / pose_spacing(tool, stock_.voxel_mm()))), 1, 100000);
   const bool straight = !m.is_arc() && (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
   const Aabb reach = stock_.roi().intersected(stock_.box().expanded(stock_.voxel_mm()));
+  const double band = stock_.band_mm();
 
   // Envelopes (neck, shank, holder, a rapid's cutter) are tested swept
   // from the pose before, exactly, so nothing hides between poses; the
@@ -89,10 +92,29 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     // What the cutting part removed from the move's start to this pose.
     sweep::Sweep so_far;
     if (!rapid) so_far = planner_.sweep_part(m, pm, tool, 0.0, s);
-    std::function<double(const Vec3&)> removed;
-    if (!so_far.prims.empty()) removed = [&so_far](const Vec3& x) { return so_far.distance(x); };
     for (std::size_t i = 0; i < regions.size(); ++i) {
       if (!boxes[i].overlaps(reach)) continue;
+      // The pending cuts that can matter here: removal only shows where
+      // it reaches within the band of the region's box.
+      std::vector<const sweep::Primitive*> near;
+      if (pending)
+        for (const auto& sw : *pending)
+          if (sw.bounds.expanded(band).overlaps(boxes[i]))
+            for (const auto& p : sw.prims)
+              if (sweep::bounds(p).expanded(band).overlaps(boxes[i])) near.push_back(&p);
+      std::function<double(const Vec3&)> removed;
+      if (!so_far.prims.empty() || !near.empty())
+        removed = [&so_far, &near, band](const Vec3& x) {
+          double d = so_far.prims.empty() ? std::numeric_limits<double>::infinity() : so_far.distance(x);
+          for (const sweep::Primitive* p : near) {
+            const Aabb& b = sweep::bounds(*p);
+            const double b2 = (b.min - x).cwiseMax(x - b.max).cwiseMax(0.0).squaredNorm();
+            const double thr = std::min(d, band);
+            if (b2 > 0 && b2 >= thr * thr) continue;
+            d = std::min(d, sweep::distance(*p, x));
+          }
+          return d;
+        };
       const tool::Shape& shape = regions[i].shape;
       const sweep::Sweep& sw = sweeps[i];
       const stock::Overlap ov =

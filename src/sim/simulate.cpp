@@ -374,28 +374,60 @@ SimResult simulate(const SimOptions& opt) {
   const bool stop_at_contact = opt.stop_at_first_contact || opt.job.stop_at_first_contact.value_or(false);
   InterferenceChecker checker(*res.stock, planner, res.contact_tolerance_mm, plopt.sweep_tolerance_mm);
   struct StopAtContact {};
+  // Consecutive moves are subtracted in batches: a leaf many short moves
+  // reach is then visited once per batch, not once per move. The contact
+  // check of a move counts the batch's earlier cuts as removed. The union
+  // removed does not depend on where batches end, so their size adapts:
+  // it grows while a flush takes under a quarter second (an interrupt or
+  // --partial then loses little), within a budget of leaves (memory).
+  constexpr std::size_t kMaxBatchMoves = 4096, kBatchPrims = 16384, kBatchLeaves = std::size_t(1) << 22;
+  constexpr double kFlushSeconds = 0.25;
+  std::size_t batch_moves = 8;
+  std::vector<sweep::Sweep> pending;
+  std::size_t pending_prims = 0, pending_leaves = 0;
+  int pending_last_line = 0;
+  auto flush = [&] {
+    if (pending.empty()) return;
+    const auto t = Clock::now();
+    res.stock->subtract(pending);
+    const double s = seconds_since(t);
+    res.timing.stock_update_s += s;
+    if (!interrupted()) res.last_line_cut = pending_last_line;
+    const double per_move = s / static_cast<double>(pending.size());
+    const double fit = per_move > 0 ? kFlushSeconds / per_move : 1e9;
+    batch_moves = static_cast<std::size_t>(std::clamp(std::min(fit, 2.0 * static_cast<double>(batch_moves)), 1.0,
+                                                      static_cast<double>(kMaxBatchMoves)));
+    pending.clear();
+    pending_prims = pending_leaves = 0;
+  };
   try {
   stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
     const auto t0 = Clock::now();
     const tool::Tool& t = tool_for(m);
     const PlannedMove pm = planner.plan(m);
-    const sweep::Sweep sw = planner.sweep(m, pm, t);
+    sweep::Sweep sw = planner.sweep(m, pm, t);
     const auto t1 = Clock::now();
-    const bool touched = checker.check(m, pm, t);
-    const auto t2 = Clock::now();
-    res.stock->subtract(sw);
+    const bool touched = checker.check(m, pm, t, &pending);
     res.timing.plan_sweep_s += std::chrono::duration<double>(t1 - t0).count();
-    res.timing.contact_check_s += std::chrono::duration<double>(t2 - t1).count();
-    res.timing.stock_update_s += seconds_since(t2);
+    res.timing.contact_check_s += seconds_since(t1);
+    if (!sw.prims.empty() && sw.bounds.overlaps(res.stock->roi().expanded(res.stock->band_mm() + res.voxel_mm))) {
+      pending_prims += sw.prims.size();
+      for (const auto& p : sw.prims) pending_leaves += res.stock->leaves_in(sweep::bounds(p));
+      pending.push_back(std::move(sw));
+    }
+    pending_last_line = m.line;
+    if (pending.size() >= batch_moves || pending_prims >= kBatchPrims || pending_leaves >= kBatchLeaves ||
+        (touched && stop_at_contact))
+      flush();
     if (interrupted())
       throw InterruptedError(SourceLocation{opt.program, m.line, 0, m.text ? *m.text : std::string()},
                              interrupt_signal().load(), "interrupted while cutting line " + std::to_string(m.line));
     ++done;
-    res.last_line_cut = m.line;
     if (opt.progress && (done % 64 == 0 || done == total_moves))
       opt.progress(static_cast<double>(done) / std::max(total_moves, 1), m.line);
     if (touched && stop_at_contact) throw StopAtContact{};
   });
+  flush();
   } catch (const InterruptedError& e) {
     if (!opt.keep_partial) throw;
     res.interrupted = true;

@@ -1,12 +1,14 @@
 #include <algorithm>
 #include <cmath>
 #include <atomic>
+#include <cstdint>
 #include <mutex>
 #include <sstream>
 
 #include <openvdb/tools/Interpolation.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 #include <unistd.h>
 
 #include "cutsim/core/error.h"
@@ -222,109 +224,256 @@ double box_distance2(const Aabb& b, const Vec3& p) {
 }  // namespace
 
 void Stock::subtract(const sweep::Sweep& sw) {
-  Impl& m = *impl_;
-  if (sw.prims.empty() || sw.bounds.empty()) return;
-  const Aabb wb = sw.bounds.expanded(m.gamma + m.h);
-  CoordBBox bb(floor_coord((wb.min - m.origin) / m.h), ceil_coord((wb.max - m.origin) / m.h));
-  bb.intersect(m.roi_index);
-  if (bb.empty()) return;
+  std::vector<const sweep::Primitive*> prims;
+  prims.reserve(sw.prims.size());
+  for (const auto& p : sw.prims) prims.push_back(&p);
+  subtract_prims(prims);
+}
 
+void Stock::subtract(const std::vector<sweep::Sweep>& batch) {
+  std::vector<const sweep::Primitive*> prims;
+  for (const auto& sw : batch)
+    for (const auto& p : sw.prims) prims.push_back(&p);
+  subtract_prims(prims);
+}
+
+namespace {
+
+// A leaf's key for sorting: its origin's leaf indices, 21 bits each.
+std::uint64_t leaf_key(const Coord& o) {
+  auto k = [](int v) { return static_cast<std::uint64_t>((v >> 3) + (1 << 20)) & 0x1fffff; };
+  return (k(o.x()) << 42) | (k(o.y()) << 21) | k(o.z());
+}
+Coord key_leaf(std::uint64_t key) {
+  auto v = [](std::uint64_t k) { return (static_cast<int>(k & 0x1fffff) - (1 << 20)) * 8; };
+  return Coord(v(key >> 42), v(key >> 21), v(key));
+}
+
+// Leaves above this count in a piece's box are culled block by block on
+// the piece's distance instead of listed whole.
+constexpr std::int64_t kListLeaves = 4096;
+
+}  // namespace
+
+void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
+  Impl& m = *impl_;
+  if (prims.empty()) return;
   auto& tree = m.grid->tree();
   const double g = m.gamma;
-  const double hd0 = std::sqrt(3.0) * 0.5 * (kLeafDim - 1) * m.h;
-  // Topology, on one thread: find the leaves the cut can change; split
-  // interior tiles the band reaches into leaves (else the cut is lost) and
-  // turn leaves wholly inside the cut into air tiles.
-  std::vector<LeafT*> leaves;
-  auto visit_leaf = [&](const Coord& o) {
-    const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
-    const double d = sw.distance(c0);
-    if (d > g + hd0) return;
-    const bool whole = m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
-    LeafT* leaf = tree.probeLeaf(o);
-    if (!leaf) {
-      float v;
-      tree.probeValue(o, v);
-      if (v > 0) return;  // air already
-      if (d < -(g + hd0) && whole) {
-        tree.addTile(1, o, m.gamma, false);
-        return;
+  const double h = m.h;
+  const double hd0 = std::sqrt(3.0) * 0.5 * (kLeafDim - 1) * h;
+  const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * h;
+
+  // 1. Bin the pieces by leaf: (leaf, piece) pairs for every leaf a
+  //    piece's box (grown by the band) reaches, in parallel per piece.
+  std::vector<std::vector<std::pair<std::uint64_t, std::uint32_t>>> per_prim(prims.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, prims.size()), [&](const auto& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      if (interrupted()) return;  // abandoned: the caller throws
+      const sweep::Primitive& p = *prims[i];
+      const Aabb wb = sweep::bounds(p).expanded(g + h);
+      CoordBBox bb(floor_coord((wb.min - m.origin) / h), ceil_coord((wb.max - m.origin) / h));
+      bb.intersect(m.roi_index);
+      if (bb.empty()) continue;
+      auto& out = per_prim[i];
+      const auto id = static_cast<std::uint32_t>(i);
+      const std::int64_t nl = std::int64_t((bb.max().x() >> 3) - (bb.min().x() >> 3) + 1) *
+                              ((bb.max().y() >> 3) - (bb.min().y() >> 3) + 1) * ((bb.max().z() >> 3) - (bb.min().z() >> 3) + 1);
+      if (nl <= kListLeaves) {
+        for (int x = bb.min().x() & ~7; x <= bb.max().x(); x += kLeafDim)
+          for (int y = bb.min().y() & ~7; y <= bb.max().y(); y += kLeafDim)
+            for (int z = bb.min().z() & ~7; z <= bb.max().z(); z += kLeafDim) out.emplace_back(leaf_key(Coord(x, y, z)), id);
+      } else {
+        for_each_leaf_block(
+            m.origin, h, bb, [&](const Vec3& c1) { return sweep::distance(p, c1) <= g + hd1; },
+            [&](const Coord& o) {
+              const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
+              if (sweep::distance(p, c0) <= g + hd0) out.emplace_back(leaf_key(o), id);
+            });
       }
-      leaf = tree.touchLeaf(o);
-    } else if (d < -(g + hd0) && whole) {
-      tree.addTile(1, o, m.gamma, false);
-      return;
     }
-    leaves.push_back(leaf);
-  };
-  // Coarse blocks first (the distance is a lower bound, so a block whose
-  // centre is farther than the band plus its half diagonal is untouched).
-  const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * m.h;
-  for_each_leaf_block(m.origin, m.h, bb, [&](const Vec3& c1) { return sw.distance(c1) <= g + hd1; }, visit_leaf);
+  });
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;
+  {
+    std::size_t n = 0;
+    for (const auto& v : per_prim) n += v.size();
+    pairs.reserve(n);
+    for (auto& v : per_prim) {
+      pairs.insert(pairs.end(), v.begin(), v.end());
+      std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(v);
+    }
+  }
+  if (pairs.empty() || interrupted()) return;
+  tbb::parallel_sort(pairs.begin(), pairs.end());
+  std::vector<std::size_t> group;  // start of each leaf's run of pairs
+  for (std::size_t i = 0; i < pairs.size(); ++i)
+    if (i == 0 || pairs[i].first != pairs[i - 1].first) group.push_back(i);
+  group.push_back(pairs.size());
+  const std::size_t ng = group.size() - 1;
+
+  // 2. Classify each leaf, in parallel (the tree is only read): by the
+  //    distance at its centre, a lower bound for its voxels outside the
+  //    cut, against the deepest material it holds.
+  enum Action : char { skip, to_air, update };
+  std::vector<char> action(ng, skip);
+  std::vector<float> centre_d(ng, 0);
+  // Each piece's distance at the leaf's centre: outside the piece (d > 0)
+  // it is exact, so d - |p - centre| bounds the piece's distance at p.
+  std::vector<double> pair_d(pairs.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ng), [&](const auto& r) {
+    if (interrupted()) return;
+    for (std::size_t gi = r.begin(); gi != r.end(); ++gi) {
+      if (interrupted()) return;
+      const Coord o = key_leaf(pairs[group[gi]].first);
+      const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
+      double d = std::numeric_limits<double>::infinity();
+      for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
+        pair_d[k] = sweep::distance(*prims[pairs[k].second], c0);
+        d = std::min(d, pair_d[k]);
+      }
+      centre_d[gi] = static_cast<float>(d);
+      if (d > g + hd0) continue;
+      const bool whole = m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
+      if (d < -(g + hd0) && whole) {
+        action[gi] = to_air;
+        continue;
+      }
+      // Only d(p) < -v(p) changes a voxel, and d(p) >= d - hd0 outside the
+      // cut: a leaf whose deepest material is shallower than that stays.
+      const LeafT* leaf = tree.probeConstLeaf(o);
+      double vmin;
+      if (leaf) {
+        const float* v = leaf->buffer().data();
+        float lo = v[0];
+        for (int i = 1; i < 512; ++i) lo = std::min(lo, v[i]);
+        vmin = lo;
+      } else {
+        vmin = tree.getValue(o);
+        if (vmin > 0) continue;  // air tile
+      }
+      if (d - hd0 >= std::max(-vmin, 0.0)) continue;
+      action[gi] = update;
+    }
+  });
+  if (interrupted()) return;
+
+  // 3. Topology, on one thread: split the material tiles the band reaches
+  //    into leaves (else the cut is lost); leaves wholly inside the cut
+  //    become air tiles.
+  std::vector<LeafT*> leaves;
+  std::vector<std::size_t> leaf_group;
+  for (std::size_t gi = 0; gi < ng; ++gi) {
+    if (action[gi] == skip) continue;
+    const Coord o = key_leaf(pairs[group[gi]].first);
+    if (action[gi] == to_air) {
+      if (tree.probeLeaf(o) || tree.getValue(o) <= 0) tree.addTile(1, o, m.gamma, false);
+      continue;
+    }
+    leaves.push_back(tree.touchLeaf(o));
+    leaf_group.push_back(gi);
+  }
   if (leaves.empty()) return;
 
-  // Voxels, in parallel: new = max(old, -tool), clamped to the band.
+  // 4. Voxels, in parallel: new = max(old, -tool), clamped to the band.
+  const double hd_sub = std::sqrt(3.0) * 1.5 * h;
   std::vector<char> all_air(leaves.size(), 0);
-  const bool single = sw.prims.size() == 1;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
     std::vector<const sweep::Primitive*> cand;
     std::vector<Aabb> cbox;
+    std::vector<double> ckey;
+    std::vector<std::pair<double, std::uint32_t>> order, sub;
     if (interrupted()) return;  // the run is abandoned; stop quickly
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      if (interrupted()) return;
       LeafT* leaf = leaves[i];
+      const std::size_t gi = leaf_group[i];
       const Coord o = leaf->origin();
-      const Vec3 lmin = m.origin + m.h * Vec3(o.x(), o.y(), o.z());
-      const Aabb lbox{lmin, lmin + Vec3::Constant(m.h * (kLeafDim - 1))};
+      const Vec3 lmin = m.origin + h * Vec3(o.x(), o.y(), o.z());
+      const Vec3 lc = lmin + Vec3::Constant(0.5 * h * (kLeafDim - 1));
+      const Aabb lbox{lmin, lmin + Vec3::Constant(h * (kLeafDim - 1))};
+      // Nearest pieces first, by their distance at the centre: the running
+      // minimum then lets the rest be cut off by that distance less the
+      // voxel's offset from the centre (a bound only outside the piece).
+      order.clear();
+      for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
+        const sweep::Primitive& p = *prims[pairs[k].second];
+        if (sweep::bounds(p).expanded(g).overlaps(lbox))
+          order.emplace_back(pair_d[k] > 0 ? pair_d[k] : -std::numeric_limits<double>::infinity(), pairs[k].second);
+      }
+      if (order.empty()) continue;
+      std::sort(order.begin(), order.end());
       cand.clear();
       cbox.clear();
-      for (const auto& p : sw.prims)
-        if (single || sweep::bounds(p).expanded(g).overlaps(lbox)) {
-          cand.push_back(&p);
-          cbox.push_back(sweep::bounds(p));
-        }
-      if (cand.empty()) continue;
-      // Nearest pieces first: the running minimum then lets most of the
-      // others be skipped on their boxes.
-      if (cand.size() > 1) {
-        const Vec3 lc = lbox.center();
-        std::vector<std::size_t> order(cand.size());
-        for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
-        std::vector<double> key(cand.size());
-        for (std::size_t k = 0; k < key.size(); ++k) key[k] = box_distance2(cbox[k], lc);
-        std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return key[a] < key[b]; });
-        std::vector<const sweep::Primitive*> c2(cand.size());
-        std::vector<Aabb> b2(cand.size());
-        for (std::size_t k = 0; k < order.size(); ++k) c2[k] = cand[order[k]], b2[k] = cbox[order[k]];
-        cand.swap(c2);
-        cbox.swap(b2);
+      ckey.clear();
+      for (const auto& [key, id] : order) {
+        cand.push_back(prims[id]);
+        cbox.push_back(sweep::bounds(*prims[id]));
+        ckey.push_back(key);
       }
       const bool partial = !m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
+      float* data = leaf->buffer().data();
+      auto& mask = leaf->getValueMask();
       bool air = true;
       std::uint64_t evaluated = 0;
-      for (auto it = leaf->beginValueAll(); it; ++it) {
-        const Coord c = it.getCoord();
-        float v = *it;
-        if (v < m.gamma && !(partial && !m.roi_index.isInside(c))) {
-          const Vec3 p = m.origin + m.h * Vec3(c.x(), c.y(), c.z());
-          // Only d < -v changes the voxel; a piece whose box is farther
-          // than that (or than the nearest piece so far) cannot matter.
-          double d = std::numeric_limits<double>::infinity();
-          const double need = -static_cast<double>(v);
-          for (std::size_t k = 0; k < cand.size(); ++k) {
-            const double thr = std::min(d, need);
-            const double b2 = box_distance2(cbox[k], p);
-            if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
-            d = std::min(d, sweep::distance(*cand[k], p));
-            if (d <= -g) break;  // clamped to air whatever the rest
-          }
-          ++evaluated;
-          if (-d > v) {
-            v = static_cast<float>(std::min(-d, g));
-            it.setValue(v);
-            it.setValueOn(v < m.gamma && v > -m.gamma);
-          }
+      // Each 4 x 4 x 4 quarter of the leaf on its own: the pieces' distances
+      // at its centre bound its voxels' more tightly than the leaf's.
+      for (int sb = 0; sb < 8; ++sb) {
+        const int bx = (sb >> 2) * 4, by = ((sb >> 1) & 1) * 4, bz = (sb & 1) * 4;
+        float vmin = m.gamma;
+        for (int ix = bx; ix < bx + 4; ++ix)
+          for (int iy = by; iy < by + 4; ++iy)
+            for (int iz = bz; iz < bz + 4; ++iz) vmin = std::min(vmin, data[(ix << 6) | (iy << 3) | iz]);
+        if (vmin >= m.gamma) continue;  // all air: stays air
+        air = false;
+        const double need_max = -static_cast<double>(vmin);  // the largest -v here
+        const Vec3 cb = lmin + h * Vec3(bx + 1.5, by + 1.5, bz + 1.5);
+        const double oc = (cb - lc).norm();
+        sub.clear();
+        for (std::size_t k = 0; k < cand.size(); ++k) {
+          if (ckey[k] - oc - hd_sub >= need_max) break;  // and every piece after it
+          const double b2 = box_distance2(cbox[k], cb);
+          const double reach = need_max + hd_sub;
+          if (b2 > 0 && (reach <= 0 || b2 >= reach * reach)) continue;
+          const double dk = sweep::distance(*cand[k], cb);
+          if (dk > 0 && dk - hd_sub >= need_max) continue;
+          sub.emplace_back(dk > 0 ? dk : -std::numeric_limits<double>::infinity(), static_cast<std::uint32_t>(k));
         }
-        if (v < m.gamma) air = false;
+        if (sub.empty()) continue;
+        std::sort(sub.begin(), sub.end());
+        for (int ix = bx; ix < bx + 4; ++ix)
+          for (int iy = by; iy < by + 4; ++iy)
+            for (int iz = bz; iz < bz + 4; ++iz) {
+              const int idx = (ix << 6) | (iy << 3) | iz;
+              const float v = data[idx];
+              if (v >= m.gamma) continue;
+              if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
+              const Vec3 p = lmin + h * Vec3(ix, iy, iz);
+              const double need = -static_cast<double>(v);
+              const double off = (p - cb).norm();
+              if (sub[0].first - off >= need) continue;
+              // Only d < -v changes the voxel; a piece farther than that (or
+              // than the nearest piece so far) cannot matter.
+              double d = std::numeric_limits<double>::infinity();
+              for (const auto& [key, k] : sub) {
+                const double thr = std::min(d, need);
+                if (key - off >= thr) break;  // and every piece after it
+                const double b2 = box_distance2(cbox[k], p);
+                if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
+                d = std::min(d, sweep::distance(*cand[k], p));
+                if (d <= -g) break;  // clamped to air whatever the rest
+              }
+              ++evaluated;
+              if (-d > v) {
+                const float nv = static_cast<float>(std::min(-d, g));
+                data[idx] = nv;
+                mask.set(static_cast<openvdb::Index>(idx), nv < m.gamma && nv > -m.gamma);
+              }
+            }
+      }
+      // A leaf with no material left becomes an air tile.
+      if (!air) {
+        air = true;
+        for (int idx = 0; idx < 512 && air; ++idx) air = data[idx] >= m.gamma;
       }
       all_air[i] = air ? 1 : 0;
       m.voxel_evaluations.fetch_add(evaluated, std::memory_order_relaxed);
@@ -466,6 +615,18 @@ void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn)
 const Aabb& Stock::box() const { return impl_->box; }
 const Aabb& Stock::roi() const { return impl_->roi; }
 double Stock::voxel_mm() const { return impl_->h; }
+double Stock::band_mm() const { return impl_->gamma; }
+
+std::size_t Stock::leaves_in(const Aabb& b) const {
+  const Impl& m = *impl_;
+  const Aabb wb = b.expanded(m.gamma + m.h);
+  CoordBBox bb(floor_coord((wb.min - m.origin) / m.h), ceil_coord((wb.max - m.origin) / m.h));
+  bb.intersect(m.roi_index);
+  if (bb.empty()) return 0;
+  std::size_t n = 1;
+  for (int k = 0; k < 3; ++k) n *= static_cast<std::size_t>((bb.max()[k] >> 3) - (bb.min()[k] >> 3) + 1);
+  return n;
+}
 
 StockStats Stock::stats() const {
   StockStats s;

@@ -1,6 +1,7 @@
 #include "cutsim/sweep/sweep.h"
 
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace cutsim::sweep {
@@ -43,9 +44,15 @@ double parallelogram_dist(const Vec3& p, const Vec3& d, double L) {
   const double s = (pd * uu - pu * du) / det;
   const double t = (pu * dd - pd * du) / det;
   if (s >= 0 && s <= 1 && t >= 0 && t <= 1) return std::fabs(p.dot(n) / nn);
+  // Outside: the nearest point of a convex polygon lies on an edge whose
+  // line separates the point from it, so only the violated edges count.
   const Vec3 o = Vec3::Zero();
-  return std::min(std::min(seg_dist3(p, o, d), seg_dist3(p, u, d + u)),
-                  std::min(seg_dist3(p, o, u), seg_dist3(p, d, d + u)));
+  double best = std::numeric_limits<double>::infinity();
+  if (t < 0) best = std::min(best, seg_dist3(p, o, d));
+  if (t > 1) best = std::min(best, seg_dist3(p, u, d + u));
+  if (s < 0) best = std::min(best, seg_dist3(p, o, u));
+  if (s > 1) best = std::min(best, seg_dist3(p, d, d + u));
+  return best;
 }
 
 // Golden-section minimum of a unimodal function on [0,1].

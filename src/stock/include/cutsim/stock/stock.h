@@ -6,6 +6,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "cutsim/core/geometry.h"
 #include "cutsim/core/mesh.h"
@@ -63,6 +64,9 @@ public:
   /// Removes the swept region from the stock. Material outside the ROI is
   /// never touched: the ROI must cover every cut (the caller sizes it).
   void subtract(const sweep::Sweep& sweep);
+  /// Removes several sweeps at once (the order does not matter: the union
+  /// is removed). Each leaf is visited once for the whole batch.
+  void subtract(const std::vector<sweep::Sweep>& batch);
 
   /// Stock volume now, mm^3: the analytic box minus what the grid lost.
   double volume_mm3() const;
@@ -110,6 +114,10 @@ public:
   const Aabb& box() const;
   const Aabb& roi() const;  ///< snapped to voxel cells
   double voxel_mm() const;
+  double band_mm() const;   ///< the narrow band's half width: values are clamped to +-this
+  /// Grid leaves (8^3 voxels) a cut inside `b` can reach: an upper bound on
+  /// the work and memory a subtract of it takes.
+  std::size_t leaves_in(const Aabb& b) const;
   StockStats stats() const;
 
   struct Impl;
@@ -118,6 +126,7 @@ public:
 
 private:
   Stock();
+  void subtract_prims(const std::vector<const sweep::Primitive*>& prims);
   std::unique_ptr<Impl> impl_;
 };
 
