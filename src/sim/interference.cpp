@@ -1,6 +1,8 @@
 #include "cutsim/sim/interference.h"
 
 #include <cmath>
+#include <vector>
+#include <algorithm>
 #include <cstdio>
 #include <limits>
 
@@ -24,7 +26,7 @@ double InterferenceChecker::pose_spacing(const tool::Tool& t, double voxel_mm) {
 }
 
 bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
-                                const std::vector<sweep::Sweep>* pending) {
+                                const std::function<bool()>& flush_pending) {
   const bool rapid = m.kind == motion::MotionKind::rapid;
   std::vector<tool::Region> regions = tool::contact_regions(tool);
   const tool::Shape cut = tool::cutting_shape(tool);
@@ -49,7 +51,6 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
   const int n = std::clamp(static_cast<int>(std::ceil(len / pose_spacing(tool, stock_.voxel_mm()))), 1, 100000);
   const bool straight = !m.is_arc() && (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
   const Aabb reach = stock_.roi().intersected(stock_.box().expanded(stock_.voxel_mm()));
-  const double band = stock_.band_mm();
 
   // Envelopes (neck, shank, holder, a rapid's cutter) are tested swept
   // from the pose before, exactly, so nothing hides between poses; the
@@ -92,37 +93,24 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     // What the cutting part removed from the move's start to this pose.
     sweep::Sweep so_far;
     if (!rapid) so_far = planner_.sweep_part(m, pm, tool, 0.0, s);
+    auto so_far_d = [&so_far](const Vec3& x, double) { return so_far.distance(x); };
     for (std::size_t i = 0; i < regions.size(); ++i) {
       if (!boxes[i].overlaps(reach)) continue;
-      // The pending cuts that can matter here: removal only shows where
-      // it reaches within the band of the region's box.
-      std::vector<const sweep::Primitive*> near;
-      if (pending)
-        for (const auto& sw : *pending)
-          if (sw.bounds.expanded(band).overlaps(boxes[i]))
-            for (const auto& p : sw.prims)
-              if (sweep::bounds(p).expanded(band).overlaps(boxes[i])) near.push_back(&p);
-      std::function<double(const Vec3&)> removed;
-      if (!so_far.prims.empty() || !near.empty())
-        removed = [&so_far, &near, band](const Vec3& x) {
-          double d = so_far.prims.empty() ? std::numeric_limits<double>::infinity() : so_far.distance(x);
-          for (const sweep::Primitive* p : near) {
-            const Aabb& b = sweep::bounds(*p);
-            const double b2 = (b.min - x).cwiseMax(x - b.max).cwiseMax(0.0).squaredNorm();
-            const double thr = std::min(d, band);
-            if (b2 > 0 && b2 >= thr * thr) continue;
-            d = std::min(d, sweep::distance(*p, x));
-          }
-          return d;
-        };
       const tool::Shape& shape = regions[i].shape;
       const sweep::Sweep& sw = sweeps[i];
-      const stock::Overlap ov =
-          sw.prims.empty()
-              ? stock_.overlap(boxes[i],
-                               [&, inv = at[i].inverse()](const Vec3& x) { return tool::shape_distance(shape, inv * x); },
-                               removed, tol_)
-              : stock_.overlap(boxes[i], [&](const Vec3& x) { return sw.distance(x); }, removed, tol_);
+      auto overlap = [&](const std::function<double(const Vec3&, double)>& removed) {
+        return sw.prims.empty()
+                   ? stock_.overlap(boxes[i],
+                                    [&, inv = at[i].inverse()](const Vec3& x) { return tool::shape_distance(shape, inv * x); },
+                                    removed, tol_)
+                   : stock_.overlap(boxes[i], [&](const Vec3& x) { return sw.distance(x); }, removed, tol_);
+      };
+      stock::Overlap ov = overlap(so_far.prims.empty() ? nullptr : std::function<double(const Vec3&, double)>(so_far_d));
+      // The batch's pending cuts only take material away: without a
+      // contact on the stock as it is, there is none after them either.
+      // With one, the pending cuts are subtracted and the pose tested again.
+      if (ov.depth_mm > tol_ && flush_pending && flush_pending())
+        ov = overlap(so_far.prims.empty() ? nullptr : std::function<double(const Vec3&, double)>(so_far_d));
       if (ov.depth_mm <= tol_) continue;
       touched = true;
       // Merge with the record of this region on this line at the pose before.

@@ -375,28 +375,27 @@ SimResult simulate(const SimOptions& opt) {
   InterferenceChecker checker(*res.stock, planner, res.contact_tolerance_mm, plopt.sweep_tolerance_mm);
   struct StopAtContact {};
   // Consecutive moves are subtracted in batches: a leaf many short moves
-  // reach is then visited once per batch, not once per move. The contact
-  // check of a move counts the batch's earlier cuts as removed. The union
-  // removed does not depend on where batches end, so their size adapts:
-  // it grows while a flush takes under a quarter second (an interrupt or
-  // --partial then loses little), within a budget of leaves (memory).
-  constexpr std::size_t kMaxBatchMoves = 4096, kBatchPrims = 16384, kBatchLeaves = std::size_t(1) << 22;
-  constexpr double kFlushSeconds = 0.25;
+  // reach is then visited once per batch, not once per move. Where the
+  // contact check finds a touch, it first subtracts the batch. The union
+  // removed does not depend on where batches end; they start small (an
+  // interrupt or --partial soon has a result) and double up to a number
+  // of moves, pieces and leaves (the memory the binning takes). Sizes
+  // follow the program only, so runs repeat exactly.
+  constexpr std::size_t kMaxBatchMoves = 4096, kBatchPrims = 16384, kBatchLeaves = std::size_t(1) << 21;
   std::size_t batch_moves = 8;
   std::vector<sweep::Sweep> pending;
   std::size_t pending_prims = 0, pending_leaves = 0;
   int pending_last_line = 0;
+  double flush_s = 0;  // stock update time spent inside the contact check
   auto flush = [&] {
     if (pending.empty()) return;
     const auto t = Clock::now();
     res.stock->subtract(pending);
     const double s = seconds_since(t);
     res.timing.stock_update_s += s;
+    flush_s += s;
     if (!interrupted()) res.last_line_cut = pending_last_line;
-    const double per_move = s / static_cast<double>(pending.size());
-    const double fit = per_move > 0 ? kFlushSeconds / per_move : 1e9;
-    batch_moves = static_cast<std::size_t>(std::clamp(std::min(fit, 2.0 * static_cast<double>(batch_moves)), 1.0,
-                                                      static_cast<double>(kMaxBatchMoves)));
+    batch_moves = std::min(2 * batch_moves, kMaxBatchMoves);
     pending.clear();
     pending_prims = pending_leaves = 0;
   };
@@ -407,9 +406,15 @@ SimResult simulate(const SimOptions& opt) {
     const PlannedMove pm = planner.plan(m);
     sweep::Sweep sw = planner.sweep(m, pm, t);
     const auto t1 = Clock::now();
-    const bool touched = checker.check(m, pm, t, &pending);
+    flush_s = 0;
+    const bool touched = checker.check(m, pm, t, [&] {
+      const bool any = !pending.empty();
+      flush();
+      return any;
+    });
     res.timing.plan_sweep_s += std::chrono::duration<double>(t1 - t0).count();
-    res.timing.contact_check_s += seconds_since(t1);
+    res.timing.contact_check_s += seconds_since(t1) - flush_s;
+    flush_s = 0;
     if (!sw.prims.empty() && sw.bounds.overlaps(res.stock->roi().expanded(res.stock->band_mm() + res.voxel_mm))) {
       pending_prims += sw.prims.size();
       for (const auto& p : sw.prims) pending_leaves += res.stock->leaves_in(sweep::bounds(p));

@@ -484,7 +484,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
 }
 
 Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3&)>& region,
-                       const std::function<double(const Vec3&)>& removed, double min_depth_mm) const {
+                       const std::function<double(const Vec3&, double)>& removed, double min_depth_mm) const {
   const Impl& m = *impl_;
   Overlap best;
   const Aabb wb = bounds.intersected(m.box.expanded(m.h));
@@ -526,7 +526,14 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
             const Vec3 p = m.origin + m.h * Vec3(x, y, z);
             const double rg = region(p);
             if (rg >= -min_depth_mm) continue;
-            if (removed) mat = std::max(mat, -removed(p));
+            if (removed) {
+              // The depth is at most what was removed here: below the best
+              // so far it cannot count, and `removed` may stop early.
+              const double floor = std::max(min_depth_mm, local.depth_mm);
+              const double r = removed(p, floor);
+              if (r <= floor) continue;
+              mat = std::max(mat, -r);
+            }
             const double depth = std::min(-rg, -mat);
             if (depth > min_depth_mm && depth > local.depth_mm) {
               local.depth_mm = depth;

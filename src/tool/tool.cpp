@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <cstdlib>
 #include <set>
 
@@ -68,6 +69,25 @@ Aabb turned_box(const EdgeProfile& e, double x0, double x1, double y0, double y1
   return b;
 }
 
+// sin and cos of a tool angle, remembered per thread: the distance
+// functions are called millions of times with the same few angles.
+struct SinCos {
+  double s, c;
+};
+SinCos sin_cos(double a) {
+  constexpr int kN = 4;  // a flank body uses three angles
+  thread_local double last_a[kN] = {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN(),
+                                    std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
+  thread_local SinCos last[kN];
+  thread_local int next = 0;
+  for (int i = 0; i < kN; ++i)
+    if (last_a[i] == a) return last[i];
+  next = (next + 1) % kN;
+  last_a[next] = a;
+  last[next] = {std::sin(a), std::cos(a)};
+  return last[next];
+}
+
 struct Visit {
   const Vec3& p;
   double operator()(const RevolvedEnvelope& e) const {
@@ -85,8 +105,10 @@ struct Visit {
     const EdgeProfile& e = f.edge;
     const double xc = e.cos_o * p.x() + e.sin_o * p.y();
     const double yc = -e.sin_o * p.x() + e.cos_o * p.y();
-    const double flank = (profile_distance_2d(e, yc, p.z()) - xc * std::tan(f.clearance)) * std::cos(f.clearance);
-    const double rake = xc * std::cos(f.rake) + p.z() * std::sin(f.rake);
+    const SinCos cl = sin_cos(f.clearance);
+    const double flank = profile_distance_2d(e, yc, p.z()) * cl.c - xc * cl.s;
+    const SinCos rk = sin_cos(f.rake);
+    const double rake = xc * rk.c + p.z() * rk.s;
     return std::max(std::max(flank, rake), std::max(-f.length - xc, p.z() - e.height));
   }
   double operator()(const SwingTorus& t) const {
@@ -98,7 +120,8 @@ struct Visit {
 
 double profile_distance_2d(const EdgeProfile& e, double y, double z, double* gy, double* gz) {
   const double a = std::fabs(y), b = z - e.nose_radius;
-  const double sb = std::sin(e.half_angle), cb = std::cos(e.half_angle);
+  const SinCos h = sin_cos(e.half_angle);
+  const double sb = h.s, cb = h.c;
   double d, ga, gb;
   if (a * sb + b * cb <= 0) {  // nearest to the apex of the wedge
     d = hypot2(a, b);

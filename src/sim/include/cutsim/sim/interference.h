@@ -1,6 +1,7 @@
 #pragma once
 // Contacts of the parts of a tool that must not touch the material:
 // clearance faces, neck, shank, holder, and on a rapid the whole tool.
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -28,15 +29,16 @@ struct Contact {
 /// poses spaced along the move, every region is tested against the
 /// material still there at that pose: the stock before the move less what
 /// the cutting part swept from the move's start to that pose (on a rapid,
-/// nothing is cut first). Cuts not yet subtracted from the stock (the
-/// batch the caller is gathering) count as removed when given.
+/// nothing is cut first). The caller may hold cuts back to subtract them in
+/// a batch: on a touch, `flush_pending` is called to subtract them (it
+/// returns true when there were any) and the pose is tested again.
 class InterferenceChecker {
 public:
   InterferenceChecker(const stock::Stock& stock, const Planner& planner, double tolerance_mm,
                       double sweep_tolerance_mm);
   /// Returns true when this move touched.
   bool check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
-             const std::vector<sweep::Sweep>* pending = nullptr);
+             const std::function<bool()>& flush_pending = nullptr);
   const std::vector<Contact>& contacts() const { return contacts_; }
   /// Poses between tested ones along a move, mm (half the smallest region).
   static double pose_spacing(const tool::Tool& t, double voxel_mm);

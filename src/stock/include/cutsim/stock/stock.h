@@ -86,10 +86,12 @@ public:
   /// inside `bounds`: depth(p) = min(-region(p), -material(p)), where the
   /// material is the stock less what `removed` (a signed distance, may be
   /// empty) covers. `region` must be exact or a lower bound outside (it
-  /// culls blocks). Only depths above `min_depth_mm` count. The stock's
-  /// values are clamped to the band, so depths stop at its half width.
+  /// culls blocks). `removed(p, floor)` may stop and return any value at
+  /// most `floor` once it knows the distance is no more than that (such a
+  /// voxel cannot count). Only depths above `min_depth_mm` count. The
+  /// stock's values are clamped to the band, so depths stop at its half width.
   Overlap overlap(const Aabb& bounds, const std::function<double(const Vec3&)>& region,
-                  const std::function<double(const Vec3&)>& removed, double min_depth_mm) const;
+                  const std::function<double(const Vec3&, double)>& removed, double min_depth_mm) const;
 
   /// Level-set value at a world point (trilinear), mm.
   double sample(const Vec3& p) const;
