@@ -496,48 +496,66 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * m.h;
   const auto& tree = m.grid->tree();
   // Blocks the region can reach (its distance is a lower bound outside),
-  // skipping air tiles.
-  std::vector<Coord> blocks;
+  // skipping air tiles; with the region's distance at their centre.
+  std::vector<std::pair<Coord, double>> blocks;
   for_each_leaf_block(m.origin, m.h, bb, [&](const Vec3& c1) { return region(c1) <= hd1 - min_depth_mm; },
                       [&](const Coord& o) {
                         const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
-                        if (region(c0) > hd0 - min_depth_mm) return;
+                        const double rc = region(c0);
+                        if (rc > hd0 - min_depth_mm) return;
                         if (!tree.probeConstLeaf(o) && tree.getValue(o) > 0) return;  // air tile
-                        blocks.push_back(o);
+                        blocks.emplace_back(o, rc);
                       });
   if (blocks.empty()) return best;
   std::mutex mu;
   std::atomic<bool> saturated{false};
   const double cap = m.gamma * (1 - 1e-6);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size()), [&](const auto& r) {
+  // The region's distance is 1-Lipschitz, so its depth at a voxel is at
+  // most the centre's depth plus the voxel's offset: voxels (and blocks)
+  // whose material or region depth cannot beat the deepest overlap found
+  // so far are passed over without evaluating the region.
+  auto scan = [&](std::size_t i0, std::size_t i1) {
     Overlap local;
-    for (std::size_t i = r.begin(); i != r.end() && !saturated.load(std::memory_order_relaxed); ++i) {
-      const Coord o = blocks[i];
+    for (std::size_t i = i0; i != i1 && !saturated.load(std::memory_order_relaxed); ++i) {
+      const Coord o = blocks[i].first;
+      const double rc = blocks[i].second;
       const LeafT* leaf = tree.probeConstLeaf(o);
+      const float* data = leaf ? leaf->buffer().data() : nullptr;
       const float tile = leaf ? 0.0f : tree.getValue(o);
+      double floor = std::max(min_depth_mm, local.depth_mm);
+      if (-rc + hd0 <= floor) continue;
+      if (data) {
+        float lo = data[0];
+        for (int k = 1; k < 512; ++k) lo = std::min(lo, data[k]);
+        if (-static_cast<double>(lo) <= floor) continue;
+      } else if (-static_cast<double>(tile) <= floor) {
+        continue;
+      }
+      const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
       CoordBBox part = CoordBBox::createCube(o, kLeafDim);
       part.intersect(bb);
       for (int x = part.min().x(); x <= part.max().x(); ++x)
         for (int y = part.min().y(); y <= part.max().y(); ++y)
           for (int z = part.min().z(); z <= part.max().z(); ++z) {
-            const Coord c(x, y, z);
-            double mat = leaf ? static_cast<double>(leaf->getValue(c)) : static_cast<double>(tile);
-            if (mat >= -min_depth_mm) continue;
+            double mat = data ? static_cast<double>(data[((x - o.x()) << 6) | ((y - o.y()) << 3) | (z - o.z())])
+                              : static_cast<double>(tile);
+            if (-mat <= floor) continue;
             const Vec3 p = m.origin + m.h * Vec3(x, y, z);
+            if (-rc + (p - c0).norm() <= floor) continue;
             const double rg = region(p);
-            if (rg >= -min_depth_mm) continue;
+            if (-rg <= floor) continue;
             if (removed) {
               // The depth is at most what was removed here: below the best
               // so far it cannot count, and `removed` may stop early.
-              const double floor = std::max(min_depth_mm, local.depth_mm);
               const double r = removed(p, floor);
               if (r <= floor) continue;
               mat = std::max(mat, -r);
             }
             const double depth = std::min(-rg, -mat);
-            if (depth > min_depth_mm && depth > local.depth_mm) {
+            if (depth > floor) {
               local.depth_mm = depth;
               local.where = p;
+              floor = depth;
             }
           }
       if (local.depth_mm >= cap) saturated = true;
@@ -546,7 +564,13 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
       std::lock_guard<std::mutex> lock(mu);
       if (local.depth_mm > best.depth_mm) best = local;
     }
-  });
+  };
+  // Few blocks (the common case: one pose of a small region) are not worth
+  // the threads' start-up.
+  if (blocks.size() <= 16) scan(0, blocks.size());
+  else
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size()),
+                      [&](const auto& r) { scan(r.begin(), r.end()); });
   best.at_least = best.depth_mm >= cap;
   return best;
 }
