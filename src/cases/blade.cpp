@@ -228,7 +228,7 @@ std::string program(const std::vector<Outline>& o, bool with_comment_of_errors) 
   };
   const int layers = 9;
   for (int k = 1; k <= layers; ++k) {
-    const double z = kHeight - k * (kHeight / layers), above = z + kHeight / layers + 0.05;
+    const double z = kHeight - k * (kHeight / layers);
     const double pick = k == layers ? 0.1 : 0.3;
     os << "(roughing layer " << k << ": Z" << f(z) << ", pick " << f(pick) << ")\n";
     const int lines = static_cast<int>(std::floor((kY1 - kY0) / pick));
@@ -248,8 +248,9 @@ std::string program(const std::vector<Outline>& o, bool with_comment_of_errors) 
         if (in && (!ok || i == nx)) {
           const double run_end = ok ? x : x0 + (x1 - x0) * (i - 1) / nx;
           // Down and up at feed below the stock's top: beside the blade the
-          // layers above leave ridges of the ball's profile in the allowance.
-          os << "G0 X" << f(run_start) << " Y" << f(y) << "\nG0 Z" << f(std::min(above, kHeight + 0.05)) << "\nG1 Z"
+          // layers above leave ridges of the ball's profile in the allowance
+          // (a rapid down to just above the layer before met them).
+          os << "G0 X" << f(run_start) << " Y" << f(y) << "\nG0 Z" << f(kHeight + 0.05) << "\nG1 Z"
              << f(z) << " F100.\nG1 X" << f(run_end) << " F600.\nG1 Z" << f(kHeight + 0.05) << "\nG0 Z" << f(safe)
              << "\n";
           in = false;
