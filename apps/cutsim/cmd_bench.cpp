@@ -32,6 +32,7 @@ struct BenchArgs {
   int threads = 0;
   std::string json;
   std::string dir = "ncprograms";
+  double voxel = 0;  // 0: each job's own
 };
 
 // The bare voxel-update kernel: a ball-end sweep's distance at the voxels of
@@ -84,6 +85,12 @@ int run_child(const std::string& cmd, std::string& out, std::string& err) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+std::string fmt_g(double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.9g", v);
+  return b;
+}
+
 std::string quote(const std::string& s) {
   std::string q = "'";
   for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
@@ -100,6 +107,8 @@ Action add_bench_command(CLI::App& app) {
   cmd->add_option("--threads", a->threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--json", a->json, "also write the table as JSON to this file");
   cmd->add_option("--dir", a->dir, "folder of the cases (default: ncprograms)");
+  cmd->add_option("--voxel", a->voxel, "voxel size for every case, mm (default: each job's own)")
+      ->check(CLI::PositiveNumber);
 
   return [a]() -> int {
     if (!fs::is_directory(a->dir)) throw InputError(a->dir, "no such folder of cases");
@@ -141,7 +150,9 @@ Action add_bench_command(CLI::App& app) {
       for (int r = 0; r < a->repeat; ++r) {
         std::string out, err;
         const int code = run_child(quote(exe) + " run " + quote(nc) + " --format json --threads " +
-                                       std::to_string(threads) + " -o " + quote(outdir),
+                                       std::to_string(threads) +
+                                       (a->voxel > 0 ? " --voxel " + fmt_g(a->voxel) : std::string()) +
+                                       " -o " + quote(outdir),
                                    out, err);
         if (code != 0 && code != 1) {
           std::error_code ec;
