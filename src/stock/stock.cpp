@@ -497,13 +497,26 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   const auto& tree = m.grid->tree();
   // Blocks the region can reach (its distance is a lower bound outside),
   // skipping air tiles; with the region's distance at their centre.
+  // Air is tested first, on the 128^3 node that holds the leaf (most of a
+  // tool's body is over air that earlier cuts left).
+  using Node1T = openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType;
   std::vector<std::pair<Coord, double>> blocks;
+  const Node1T* node = nullptr;
+  Coord node_origin(std::numeric_limits<int>::max());
+  bool node_air = false;
   for_each_leaf_block(m.origin, m.h, bb, [&](const Vec3& c1) { return region(c1) <= hd1 - min_depth_mm; },
                       [&](const Coord& o) {
+                        const Coord n1(o.x() & ~(kNode1Dim - 1), o.y() & ~(kNode1Dim - 1), o.z() & ~(kNode1Dim - 1));
+                        if (n1 != node_origin) {
+                          node_origin = n1;
+                          node = tree.probeConstNode<Node1T>(n1);
+                          node_air = !node && tree.getValue(n1) > 0;
+                        }
+                        if (node_air) return;
+                        if (node && !node->probeConstLeaf(o) && node->getValue(o) > 0) return;  // air tile
                         const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
                         const double rc = region(c0);
                         if (rc > hd0 - min_depth_mm) return;
-                        if (!tree.probeConstLeaf(o) && tree.getValue(o) > 0) return;  // air tile
                         blocks.emplace_back(o, rc);
                       });
   if (blocks.empty()) return best;
