@@ -239,15 +239,39 @@ void Stock::subtract(const std::vector<sweep::Sweep>& batch) {
 
 namespace {
 
-// A leaf's key for sorting: its origin's leaf indices, 21 bits each.
-std::uint64_t leaf_key(const Coord& o) {
-  auto k = [](int v) { return static_cast<std::uint64_t>((v >> 3) + (1 << 20)) & 0x1fffff; };
-  return (k(o.x()) << 42) | (k(o.y()) << 21) | k(o.z());
+int bits_for(std::uint64_t n) {  // bits to hold 0 .. n - 1
+  int b = 0;
+  while (b < 64 && (std::uint64_t(1) << b) < n) ++b;
+  return b;
 }
-Coord key_leaf(std::uint64_t key) {
-  auto v = [](std::uint64_t k) { return (static_cast<int>(k & 0x1fffff) - (1 << 20)) * 8; };
-  return Coord(v(key >> 42), v(key >> 21), v(key));
-}
+
+// (leaf, piece) packed in one integer, sorted by leaf: the leaf's indices
+// relative to the ROI's first leaf, then the piece.
+struct LeafKeys {
+  Coord lo;  // first leaf of the ROI, in leaf units
+  int by = 0, bz = 0, bp = 0, total = 0;
+  LeafKeys(const CoordBBox& roi, std::size_t pieces) {
+    lo = Coord(roi.min().x() >> 3, roi.min().y() >> 3, roi.min().z() >> 3);
+    const int bx = bits_for(std::uint64_t((roi.max().x() >> 3) - lo.x() + 1));
+    by = bits_for(std::uint64_t((roi.max().y() >> 3) - lo.y() + 1));
+    bz = bits_for(std::uint64_t((roi.max().z() >> 3) - lo.z() + 1));
+    bp = bits_for(pieces);
+    total = bx + by + bz + bp;
+  }
+  std::uint64_t key(const Coord& o, std::uint32_t piece) const {
+    const std::uint64_t leaf = (std::uint64_t((o.x() >> 3) - lo.x()) << (by + bz)) |
+                               (std::uint64_t((o.y() >> 3) - lo.y()) << bz) | std::uint64_t((o.z() >> 3) - lo.z());
+    return (leaf << bp) | piece;
+  }
+  std::uint64_t leaf_of(std::uint64_t k) const { return k >> bp; }
+  std::uint32_t piece(std::uint64_t k) const { return static_cast<std::uint32_t>(k & ((std::uint64_t(1) << bp) - 1)); }
+  Coord origin(std::uint64_t k) const {
+    const std::uint64_t leaf = k >> bp;
+    const auto x = static_cast<int>(leaf >> (by + bz)), y = static_cast<int>((leaf >> bz) & ((std::uint64_t(1) << by) - 1)),
+               z = static_cast<int>(leaf & ((std::uint64_t(1) << bz) - 1));
+    return Coord((x + lo.x()) * 8, (y + lo.y()) * 8, (z + lo.z()) * 8);
+  }
+};
 
 // Leaves above this count in a piece's box are culled block by block on
 // the piece's distance instead of listed whole.
@@ -264,9 +288,19 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   const double hd0 = std::sqrt(3.0) * 0.5 * (kLeafDim - 1) * h;
   const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * h;
 
-  // 1. Bin the pieces by leaf: (leaf, piece) pairs for every leaf a
+  // 1. Bin the pieces by leaf: (leaf, piece) keys for every leaf a
   //    piece's box (grown by the band) reaches, in parallel per piece.
-  std::vector<std::vector<std::pair<std::uint64_t, std::uint32_t>>> per_prim(prims.size());
+  const LeafKeys keys(m.roi_index, prims.size());
+  if (keys.total > 64) {
+    // More pieces than the key holds beside this ROI's leaves: halves (the
+    // union removed does not depend on the split).
+    if (prims.size() == 1) throw GeometryError({}, "the region of interest has too many leaves to index");
+    const auto mid = prims.begin() + static_cast<std::ptrdiff_t>(prims.size() / 2);
+    subtract_prims(std::vector<const sweep::Primitive*>(prims.begin(), mid));
+    subtract_prims(std::vector<const sweep::Primitive*>(mid, prims.end()));
+    return;
+  }
+  std::vector<std::vector<std::uint64_t>> per_prim(prims.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, prims.size()), [&](const auto& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (interrupted()) return;  // abandoned: the caller throws
@@ -282,32 +316,32 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       if (nl <= kListLeaves) {
         for (int x = bb.min().x() & ~7; x <= bb.max().x(); x += kLeafDim)
           for (int y = bb.min().y() & ~7; y <= bb.max().y(); y += kLeafDim)
-            for (int z = bb.min().z() & ~7; z <= bb.max().z(); z += kLeafDim) out.emplace_back(leaf_key(Coord(x, y, z)), id);
+            for (int z = bb.min().z() & ~7; z <= bb.max().z(); z += kLeafDim) out.push_back(keys.key(Coord(x, y, z), id));
       } else {
         for_each_leaf_block(
             m.origin, h, bb, [&](const Vec3& c1) { return sweep::distance(p, c1) <= g + hd1; },
             [&](const Coord& o) {
               const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
-              if (sweep::distance(p, c0) <= g + hd0) out.emplace_back(leaf_key(o), id);
+              if (sweep::distance(p, c0) <= g + hd0) out.push_back(keys.key(o, id));
             });
       }
     }
   });
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> pairs;
+  std::vector<std::uint64_t> pairs;
   {
     std::size_t n = 0;
     for (const auto& v : per_prim) n += v.size();
     pairs.reserve(n);
     for (auto& v : per_prim) {
       pairs.insert(pairs.end(), v.begin(), v.end());
-      std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(v);
+      std::vector<std::uint64_t>().swap(v);
     }
   }
   if (pairs.empty() || interrupted()) return;
   tbb::parallel_sort(pairs.begin(), pairs.end());
-  std::vector<std::size_t> group;  // start of each leaf's run of pairs
+  std::vector<std::size_t> group;  // start of each leaf's run of keys
   for (std::size_t i = 0; i < pairs.size(); ++i)
-    if (i == 0 || pairs[i].first != pairs[i - 1].first) group.push_back(i);
+    if (i == 0 || keys.leaf_of(pairs[i]) != keys.leaf_of(pairs[i - 1])) group.push_back(i);
   group.push_back(pairs.size());
   const std::size_t ng = group.size() - 1;
 
@@ -324,11 +358,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     if (interrupted()) return;
     for (std::size_t gi = r.begin(); gi != r.end(); ++gi) {
       if (interrupted()) return;
-      const Coord o = key_leaf(pairs[group[gi]].first);
+      const Coord o = keys.origin(pairs[group[gi]]);
       const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
       double d = std::numeric_limits<double>::infinity();
       for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
-        pair_d[k] = sweep::distance(*prims[pairs[k].second], c0);
+        pair_d[k] = sweep::distance(*prims[keys.piece(pairs[k])], c0);
         d = std::min(d, pair_d[k]);
       }
       centre_d[gi] = static_cast<float>(d);
@@ -364,7 +398,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   std::vector<std::size_t> leaf_group;
   for (std::size_t gi = 0; gi < ng; ++gi) {
     if (action[gi] == skip) continue;
-    const Coord o = key_leaf(pairs[group[gi]].first);
+    const Coord o = keys.origin(pairs[group[gi]]);
     if (action[gi] == to_air) {
       if (tree.probeLeaf(o) || tree.getValue(o) <= 0) tree.addTile(1, o, m.gamma, false);
       continue;
@@ -396,9 +430,9 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       // voxel's offset from the centre (a bound only outside the piece).
       order.clear();
       for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
-        const sweep::Primitive& p = *prims[pairs[k].second];
-        if (sweep::bounds(p).expanded(g).overlaps(lbox))
-          order.emplace_back(pair_d[k] > 0 ? pair_d[k] : -std::numeric_limits<double>::infinity(), pairs[k].second);
+        const std::uint32_t id = keys.piece(pairs[k]);
+        if (sweep::bounds(*prims[id]).expanded(g).overlaps(lbox))
+          order.emplace_back(pair_d[k] > 0 ? pair_d[k] : -std::numeric_limits<double>::infinity(), id);
       }
       if (order.empty()) continue;
       std::sort(order.begin(), order.end());
