@@ -350,7 +350,6 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   //    cut, against the deepest material it holds.
   enum Action : char { skip, to_air, update };
   std::vector<char> action(ng, skip);
-  std::vector<float> centre_d(ng, 0);
   // Each piece's distance at the leaf's centre: outside the piece (d > 0)
   // it is exact, so d - |p - centre| bounds the piece's distance at p.
   std::vector<double> pair_d(pairs.size());
@@ -365,7 +364,6 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         pair_d[k] = sweep::distance(*prims[keys.piece(pairs[k])], c0);
         d = std::min(d, pair_d[k]);
       }
-      centre_d[gi] = static_cast<float>(d);
       if (d > g + hd0) continue;
       const bool whole = m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
       if (d < -(g + hd0) && whole) {
