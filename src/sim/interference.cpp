@@ -1,10 +1,10 @@
 #include "cutsim/sim/interference.h"
 
-#include <cmath>
-#include <vector>
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <limits>
+#include <vector>
 
 #include "cutsim/sweep/sweep.h"
 

@@ -414,13 +414,13 @@ SimResult simulate(const SimOptions& opt) {
     });
     res.timing.plan_sweep_s += std::chrono::duration<double>(t1 - t0).count();
     res.timing.contact_check_s += seconds_since(t1) - flush_s;
-    flush_s = 0;
     if (!sw.prims.empty() && sw.bounds.overlaps(res.stock->roi().expanded(res.stock->band_mm() + res.voxel_mm))) {
       pending_prims += sw.prims.size();
       for (const auto& p : sw.prims) pending_leaves += res.stock->leaves_in(sweep::bounds(p));
       pending.push_back(std::move(sw));
     }
     pending_last_line = m.line;
+    if (pending.empty() && !interrupted()) res.last_line_cut = m.line;  // nothing of it waits to be cut
     if (pending.size() >= batch_moves || pending_prims >= kBatchPrims || pending_leaves >= kBatchLeaves ||
         (touched && stop_at_contact))
       flush();
