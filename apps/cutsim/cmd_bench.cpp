@@ -103,12 +103,12 @@ Action add_bench_command(CLI::App& app) {
   auto a = std::make_shared<BenchArgs>();
   CLI::App* cmd = app.add_subcommand("bench", "run reference cases and print a table of time, memory, throughput and results");
   cmd->add_option("cases", a->cases, "case names: DIR/<name>.nc with DIR/<name>.toml (default: every such pair in DIR)");
-  cmd->add_option("--repeat", a->repeat, "runs per case; times are medians")->check(CLI::PositiveNumber);
-  cmd->add_option("--threads", a->threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--repeat", a->repeat, "runs per case; times are medians")->check(kPositive);
+  cmd->add_option("--threads", a->threads, "worker threads (default: all cores)")->check(kNonNegative);
   cmd->add_option("--json", a->json, "also write the table as JSON to this file");
   cmd->add_option("--dir", a->dir, "folder of the cases (default: ncprograms)");
   cmd->add_option("--voxel", a->voxel, "voxel size for every case, mm (default: each job's own)")
-      ->check(CLI::PositiveNumber);
+      ->check(kPositive);
 
   return [a]() -> int {
     if (!fs::is_directory(a->dir)) throw InputError(a->dir, "no such folder of cases");

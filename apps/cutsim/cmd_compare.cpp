@@ -37,10 +37,10 @@ Action add_compare_command(CLI::App& app) {
   cmd->add_option("--job", a->job, "job file whose [target] places the target (offset, rotate_deg, scale) and sets the tolerance");
   cmd->add_option("-o,--output", a->outdir, "output directory (created if missing)");
   cmd->add_option("--tolerance", a->tolerance, "deviation band counted as in tolerance, mm (default 0.001)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegative);
   cmd->add_option("--voxel", a->voxel, "voxel size for a mesh MACHINED, mm (default: its largest side / 1000)")
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--glb-scale", a->glb_scale, "scale of the glb's root node (1: metres)")->check(CLI::PositiveNumber);
+      ->check(kPositive);
+  cmd->add_option("--glb-scale", a->glb_scale, "scale of the glb's root node (1: metres)")->check(kPositive);
   cmd->add_option("--mesh-adaptivity", a->mesh_adaptivity, "surface mesh adaptivity for a .vdb, 0 to 1")
       ->check(CLI::Range(0.0, 1.0));
   cmd->add_option("--format", a->format, "console output: text or json")->check(CLI::IsMember({"text", "json"}));

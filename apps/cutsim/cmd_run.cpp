@@ -75,7 +75,7 @@ Action add_run_command(CLI::App& app) {
   cmd->add_option("program", args->program, "NC program (G-code)")->required();
   cmd->add_option("--job", args->job, "job file (TOML); default: <program stem>.toml beside the program, if present");
   cmd->add_option("-o,--output", args->outdir, "output directory (created if missing)");
-  cmd->add_option("--voxel", args->voxel, "voxel size, mm")->check(CLI::PositiveNumber);
+  cmd->add_option("--voxel", args->voxel, "voxel size, mm")->check(kPositive);
   cmd->add_option("--format", args->format, "console output: text or json")->check(CLI::IsMember({"text", "json"}));
   cmd->add_option("--stock-box", args->stock_box, "stock box XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX in mm");
   cmd->add_option("--tool", args->tool,
@@ -84,9 +84,9 @@ Action add_run_command(CLI::App& app) {
   cmd->add_option("--tools", args->tools, "tool library by T number: TOML ([[tool]]) or a LinuxCNC .tbl table");
   cmd->add_option("--contact-tolerance", args->contact_tolerance,
                   "contacts shallower than this are not reported, mm (default: a quarter voxel)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegative);
   cmd->add_flag("--stop-at-contact", args->stop_at_contact, "stop at the first contact and write the stock as it is then");
-  cmd->add_option("--threads", args->threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--threads", args->threads, "worker threads (default: all cores)")->check(kNonNegative);
   cmd->add_flag("--save-vdb", args->save_vdb,
                 "also write the stock grid as OUTDIR/<stem>.vdb (OpenVDB), for 'cutsim compare' later");
   cmd->add_option("--dialect", args->dialect, "G-code dialect: rs274ngc (default) or fanuc")
@@ -104,10 +104,10 @@ Action add_run_command(CLI::App& app) {
                 "<stem>.partial.report.json (default: write nothing)");
   cmd->add_option("--target", args->target, "target (design) mesh: STL, OBJ, PLY, glTF or glb, in the workpiece frame");
   cmd->add_option("--tolerance", args->tolerance, "deviation band counted as in tolerance, mm (default 0.001)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNonNegative);
   cmd->add_option("--glb-scale", args->glb_scale,
                   "scale of the glb's root node (1: metres; 1000 shows a 1 mm part as 1 m)")
-      ->check(CLI::PositiveNumber);
+      ->check(kPositive);
   cmd->add_option("--mesh-adaptivity", args->mesh_adaptivity,
                   "0: one quad per surface voxel; 0.01 (default) to 1: merge ever less flat regions into larger polygons")
       ->check(CLI::Range(0.0, 1.0));
