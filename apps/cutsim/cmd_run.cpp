@@ -166,7 +166,11 @@ Action add_run_command(CLI::App& app) {
     out.report = (fs::path(args->outdir) / (stem + ".report.json")).string();
 
     const auto t_exp = std::chrono::steady_clock::now();
+    res.timing.peak_rss_simulate_mb = sim::peak_rss_mb();
+    auto since = [](auto t) { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count(); };
     const TriMesh mesh = res.stock->surface_mesh(args->mesh_adaptivity);
+    res.timing.mesh_s = since(t_exp);
+    const auto t_cmp = std::chrono::steady_clock::now();
     io::GltfPart part{"machined_stock", &mesh, {0.75f, 0.75f, 0.78f, 1.0f}};
     io::GltfOptions gopt;
     gopt.scale = args->glb_scale;
@@ -179,6 +183,8 @@ Action add_run_command(CLI::App& app) {
     } else {
       parts.push_back(part);
     }
+    res.timing.compare_s = since(t_cmp);
+    const auto t_write = std::chrono::steady_clock::now();
     // Contact markers: one node per contact (the first 200), named by its NC
     // line; rapids magenta, clearance faces orange, neck/shank/holder yellow.
     std::vector<TriMesh> markers;
@@ -215,7 +221,8 @@ Action add_run_command(CLI::App& app) {
         throw;
       }
     }
-    res.timing.export_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_exp).count();
+    res.timing.write_s = since(t_write);
+    res.timing.export_s = since(t_exp);
     res.timing.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const std::string json = sim::report_json(res, out);
     try {

@@ -102,7 +102,9 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   j["timing_s"] = {{"parse", r.timing.parse_s}, {"simulate", r.timing.simulate_s},
                    {"export", r.timing.export_s}, {"total", r.timing.total_s},
                    {"stock_build", r.timing.stock_build_s}, {"plan_and_sweep", r.timing.plan_sweep_s},
-                   {"stock_update", r.timing.stock_update_s}, {"contact_check", r.timing.contact_check_s}};
+                   {"stock_update", r.timing.stock_update_s}, {"contact_check", r.timing.contact_check_s},
+                   {"mesh", r.timing.mesh_s}, {"compare", r.timing.compare_s}, {"write", r.timing.write_s}};
+  j["peak_rss_simulate_mb"] = r.timing.peak_rss_simulate_mb;
   j["peak_rss_mb"] = peak_rss_mb();
   return j.dump(2) + "\n";
 }
@@ -145,8 +147,12 @@ std::string report_text(const SimResult& r, const ReportOutputs& out) {
                   a.amplitude_mm, a.limited_by.c_str());
     os << buf;
   }
-  std::snprintf(buf, sizeof buf, "time: parse %.2f s, simulate %.2f s, export %.2f s, total %.2f s; peak RSS %.0f MB\n",
-                r.timing.parse_s, r.timing.simulate_s, r.timing.export_s, r.timing.total_s, peak_rss_mb());
+  std::snprintf(buf, sizeof buf,
+                "time: parse %.2f s, simulate %.2f s (stock update %.2f, contact check %.2f), export %.2f s (mesh %.2f, "
+                "compare %.2f, write %.2f), total %.2f s; peak RSS %.0f MB (%.0f MB when the simulation ended)\n",
+                r.timing.parse_s, r.timing.simulate_s, r.timing.stock_update_s, r.timing.contact_check_s,
+                r.timing.export_s, r.timing.mesh_s, r.timing.compare_s, r.timing.write_s, r.timing.total_s,
+                peak_rss_mb(), r.timing.peak_rss_simulate_mb);
   os << buf;
   if (!out.glb.empty()) os << "wrote " << out.glb << "\n";
   if (!out.vdb.empty()) os << "wrote " << out.vdb << "\n";

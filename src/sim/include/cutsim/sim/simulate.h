@@ -65,6 +65,10 @@ struct Timing {
   double plan_sweep_s = 0;    ///< part of simulate_s: kinematics, planning and sweep construction
   double stock_update_s = 0;  ///< part of simulate_s: subtracting sweeps from the grid
   double contact_check_s = 0; ///< part of simulate_s: testing the non-cutting regions
+  double mesh_s = 0;          ///< part of export_s: the machined surface's mesh
+  double compare_s = 0;       ///< part of export_s: overcut/undercut volumes, regions and deviations
+  double write_s = 0;         ///< part of export_s: writing the glb (and the .vdb)
+  double peak_rss_simulate_mb = 0;  ///< peak RSS when the simulation ended (before the export)
 };
 
 /// Surface heights of the machined top along a line ([report] profile).
