@@ -1,6 +1,10 @@
 #include "cutsim/compare/compare.h"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <mutex>
 
 #include <openvdb/openvdb.h>
@@ -27,10 +31,13 @@ TriMesh mesh_region(const std::vector<RegionBlock>& blocks, const Vec3& origin, 
   auto grid = openvdb::FloatGrid::create(static_cast<float>(h));
   grid->setTransform(openvdb::math::Transform::createLinearTransform(h));
   auto acc = grid->getAccessor();
-  for (const auto& b : blocks)
+  for (const auto& b : blocks) {
+    // Blocks are leaf-aligned in the stock's lattice, not necessarily in
+    // this grid's: set voxels through the accessor.
     for (int x = 0; x < b.n[0]; ++x)
       for (int y = 0; y < b.n[1]; ++y)
         for (int z = 0; z < b.n[2]; ++z) acc.setValue(b.origin.offsetBy(x, y, z), b.v[(x * 8 + y) * 8 + z]);
+  }
   std::vector<openvdb::Vec3s> pts;
   std::vector<openvdb::Vec3I> tris;
   std::vector<openvdb::Vec4I> quads;
@@ -45,6 +52,151 @@ TriMesh mesh_region(const std::vector<RegionBlock>& blocks, const Vec3& origin, 
   return out;
 }
 
+// The target's signed distance at every block centre of the ROI lattice,
+// or, where the surface is farther than the block's reach, only its sign.
+//
+// A bounded query per block finds the near ones. A far block (no surface
+// within R = hd + h of its centre) takes its sign from a neighbour: two
+// neighbouring centres are at most 8h apart, and the balls of radius R
+// around them (or R and |d| > h, for a known neighbour) cover the segment
+// between them, which therefore does not cross the surface. Only a region
+// of far blocks with no known neighbour needs an unbounded query.
+struct TargetBlocks {
+  std::array<int, 3> dims{};
+  std::vector<float> d;           // signed distance at the centre; far: +-far_value
+  std::vector<std::int8_t> state; // 0 far and unsigned, 1 far and signed, 2 known
+  std::vector<Vec3> centre;
+  float far_value = 0;
+
+  std::size_t index(const int* l) const {
+    return (static_cast<std::size_t>(l[0]) * dims[1] + static_cast<std::size_t>(l[1])) * dims[2] +
+           static_cast<std::size_t>(l[2]);
+  }
+};
+
+TargetBlocks classify_blocks(const stock::Stock& stock, const Target& target, double h, double reach) {
+  TargetBlocks tb;
+  tb.dims = stock.roi_block_dims();
+  const std::size_t n = static_cast<std::size_t>(tb.dims[0]) * tb.dims[1] * tb.dims[2];
+  tb.d.assign(n, 0.0f);
+  tb.state.assign(n, -1);  // -1: not in the ROI (never visited)
+  tb.centre.assign(n, Vec3::Zero());
+  tb.far_value = static_cast<float>(reach);
+  stock.for_each_roi_block(
+      [&](const stock::VoxelBlock& b) {
+        const std::size_t i = tb.index(b.leaf);
+        const Vec3 c = b.first_center + 0.5 * h * Vec3(b.n[0] - 1, b.n[1] - 1, b.n[2] - 1);
+        tb.centre[i] = c;
+        if (const auto d = target.signed_distance_if_within(c, reach)) {
+          tb.d[i] = static_cast<float>(*d);
+          tb.state[i] = 2;
+        } else {
+          tb.state[i] = 0;
+        }
+      },
+      false);
+  // Breadth-first over the lattice from every block whose sign can pass on.
+  std::vector<std::size_t> queue;
+  for (std::size_t i = 0; i < n; ++i)
+    if (tb.state[i] == 2 && std::fabs(tb.d[i]) > h) queue.push_back(i);
+  const std::size_t stride[3] = {static_cast<std::size_t>(tb.dims[1]) * tb.dims[2],
+                                 static_cast<std::size_t>(tb.dims[2]), 1};
+  auto spread = [&]() {
+    while (!queue.empty()) {
+      const std::size_t i = queue.back();
+      queue.pop_back();
+      const float s = tb.d[i] < 0 ? -tb.far_value : tb.far_value;
+      std::size_t rest = i;
+      for (int k = 0; k < 3; ++k) {
+        const auto l = static_cast<int>(rest / stride[k]);
+        rest %= stride[k];
+        if (l > 0 && tb.state[i - stride[k]] == 0) {
+          tb.state[i - stride[k]] = 1;
+          tb.d[i - stride[k]] = s;
+          queue.push_back(i - stride[k]);
+        }
+        if (l + 1 < tb.dims[static_cast<std::size_t>(k)] && tb.state[i + stride[k]] == 0) {
+          tb.state[i + stride[k]] = 1;
+          tb.d[i + stride[k]] = s;
+          queue.push_back(i + stride[k]);
+        }
+      }
+    }
+  };
+  spread();
+  for (std::size_t i = 0; i < n; ++i) {
+    if (tb.state[i] != 0) continue;
+    tb.d[i] = target.signed_distance(tb.centre[i]) < 0 ? -tb.far_value : tb.far_value;
+    tb.state[i] = 1;
+    queue.push_back(i);
+    spread();
+  }
+  return tb;
+}
+
+// The target's distance at a block's voxels, clamped to +-h. Voxels nearer
+// the centre than |d_c| - h are saturated; the rest ask for the surface
+// within 1.5h. A voxel with none that near (|d| > 1.5h) has the sign of any
+// neighbour whose sign is known: its ball of radius |d| holds the neighbour
+// h away with half a voxel to spare (so a neighbour on the surface, whose
+// sign is a coin toss, cannot pass one on). Flooding from the known voxels
+// (and from the centre, within h of some voxel) reaches every voxel.
+void block_target_distances(const stock::VoxelBlock& b, const Vec3& centre, double dc, const Target& target,
+                            double h, float* dt) {
+  constexpr float kUnknown = std::numeric_limits<float>::quiet_NaN();
+  const float hf = static_cast<float>(h);
+  int unknown = 0;
+  for (int x = 0; x < b.n[0]; ++x)
+    for (int y = 0; y < b.n[1]; ++y)
+      for (int z = 0; z < b.n[2]; ++z) {
+        const int i = (x * 8 + y) * 8 + z;
+        const Vec3 p = b.first_center + h * Vec3(x, y, z);
+        const double r = (p - centre).norm();
+        if (r <= std::fabs(dc) - h) {
+          dt[i] = dc < 0 ? -hf : hf;
+        } else if (const auto d = target.signed_distance_if_within(p, 1.5 * h)) {
+          dt[i] = static_cast<float>(std::clamp(*d, -h, h));
+        } else if (r <= h) {
+          dt[i] = dc < 0 ? -hf : hf;  // the centre lies in this voxel's empty ball
+        } else {
+          dt[i] = kUnknown;
+          ++unknown;
+        }
+      }
+  if (unknown == 0) return;
+  int stack[512];
+  int top = 0;
+  for (int x = 0; x < b.n[0]; ++x)
+    for (int y = 0; y < b.n[1]; ++y)
+      for (int z = 0; z < b.n[2]; ++z) {
+        const int i = (x * 8 + y) * 8 + z;
+        if (!std::isnan(dt[i]) && std::fabs(dt[i]) > 0) stack[top++] = i;
+      }
+  while (top > 0) {
+    const int i = stack[--top];
+    const int c[3] = {i >> 6, (i >> 3) & 7, i & 7};
+    const float s = dt[i] < 0 ? -hf : hf;
+    for (int k = 0; k < 3; ++k)
+      for (int dir = -1; dir <= 1; dir += 2) {
+        const int q = c[k] + dir;
+        if (q < 0 || q >= b.n[k]) continue;
+        const int j = i + dir * (k == 0 ? 64 : k == 1 ? 8 : 1);
+        if (std::isnan(dt[j])) {
+          dt[j] = s;
+          stack[top++] = j;
+        }
+      }
+  }
+  // Unreachable by the argument above; an unbounded query keeps it safe.
+  for (int x = 0; x < b.n[0]; ++x)
+    for (int y = 0; y < b.n[1]; ++y)
+      for (int z = 0; z < b.n[2]; ++z) {
+        const int i = (x * 8 + y) * 8 + z;
+        if (std::isnan(dt[i]))
+          dt[i] = static_cast<float>(std::clamp(target.signed_distance(b.first_center + h * Vec3(x, y, z)), -h, h));
+      }
+}
+
 }  // namespace
 
 CompareResult compare(const stock::Stock& stock, const Target& target, const TriMesh& machined,
@@ -53,6 +205,7 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
   r.tolerance_mm = opt.tolerance_mm;
   const double h = stock.voxel_mm();
   const double hd = std::sqrt(3.0) * 3.5 * h;  // block centre to its farthest voxel centre
+  const TargetBlocks tb = classify_blocks(stock, target, h, hd + h);
 
   // Volumes: blocks summed into per-block slots, then added in a fixed
   // order so the answer does not depend on threading.
@@ -62,9 +215,14 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
   std::mutex mu;
   const Vec3 grid_origin = (stock.roi().min / h).array().round().matrix() * h;
   stock.for_each_roi_block([&](const stock::VoxelBlock& b) {
-    const Vec3 centre = b.first_center + 0.5 * h * Vec3(b.n[0] - 1, b.n[1] - 1, b.n[2] - 1);
-    const double dc = target.signed_distance_within(centre, hd + h);
-    const bool target_uniform = std::fabs(dc) >= hd + 0.5 * h;
+    const std::size_t bi = tb.index(b.leaf);
+    const double dc = tb.d[bi];
+    float dt[512];
+    if (tb.state[bi] == 1 || std::fabs(dc) >= hd + h) {
+      std::fill(std::begin(dt), std::end(dt), static_cast<float>(dc < 0 ? -h : h));
+    } else {
+      block_target_distances(b, tb.centre[bi], dc, target, h, dt);
+    }
     double over = 0, under = 0;
     RegionBlock ro, ru;
     for (int x = 0; x < b.n[0]; ++x)
@@ -73,22 +231,12 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
           const int i = (x * 8 + y) * 8 + z;
           const double ds = b.uniform ? b.value : b.values[i];
           const double fs = fraction(ds, h);
-          double dt;
-          if (target_uniform) {
-            dt = dc < 0 ? -h : h;
-          } else {
-            // Distance is 1-Lipschitz: a voxel nearer the centre than
-            // |dc| - h/2 is saturated like the centre; only the rest need a query.
-            const Vec3 p = b.first_center + h * Vec3(x, y, z);
-            if ((p - centre).norm() <= std::fabs(dc) - 0.5 * h) dt = dc < 0 ? -h : h;
-            else dt = std::clamp(target.signed_distance_within(p, h), -h, h);
-          }
-          const double ft = fraction(dt, h);
+          const double ft = fraction(dt[i], h);
           over += std::max(0.0, ft - fs);
           under += std::max(0.0, fs - ft);
           const double cs = std::clamp(ds, -h, h);
-          ro.v[i] = static_cast<float>(std::max(dt, -cs));
-          ru.v[i] = static_cast<float>(std::max(cs, -dt));
+          ro.v[i] = static_cast<float>(std::max<double>(dt[i], -cs));
+          ru.v[i] = static_cast<float>(std::max<double>(cs, -dt[i]));
         }
     if (over == 0 && under == 0) return;
     const Vec3 idx = (b.first_center - grid_origin) / h;
@@ -117,9 +265,19 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
   // Deviation at every vertex of the machined surface.
   const std::size_t nv = machined.positions.size();
   r.vertex_deviation_mm.resize(nv);
+  // Neighbouring vertices are near each other in the mesher's order, and
+  // distance is 1-Lipschitz: |d(v)| <= |d(u)| + |v - u| bounds the search.
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv), [&](const auto& range) {
-    for (std::size_t i = range.begin(); i != range.end(); ++i)
-      r.vertex_deviation_mm[i] = static_cast<float>(target.signed_distance(machined.positions[i]));
+    double last = -1;
+    Vec3 last_p = Vec3::Zero();
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      const Vec3& p = machined.positions[i];
+      const double d = last < 0 ? target.signed_distance(p)
+                                 : target.signed_distance_within(p, (last + (p - last_p).norm()) * (1 + 1e-9) + 1e-12);
+      r.vertex_deviation_mm[i] = static_cast<float>(d);
+      last = std::fabs(d);
+      last_p = p;
+    }
   });
   double area_in = 0, area_all = 0;
   for (const auto& t : machined.triangles) {

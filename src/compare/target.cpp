@@ -214,6 +214,12 @@ double Target::signed_distance_within(const Vec3& p, double radius) const {
   return signed_distance(p);
 }
 
+std::optional<double> Target::signed_distance_if_within(const Vec3& p, double radius) const {
+  Impl::Query q;
+  if (impl_->closest(p, radius, q)) return impl_->sign_at(q) * std::sqrt(q.best2);
+  return std::nullopt;
+}
+
 bool Target::inside(const Vec3& p) const { return impl_->inside_by_ray(p); }
 
 void Target::debug_closest(const Vec3& p, unsigned* prim, int* feature, Vec3* closest) const {

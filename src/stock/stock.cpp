@@ -656,13 +656,14 @@ double Stock::surface_height(double x, double y, double z_from) const {
   return std::numeric_limits<double>::quiet_NaN();
 }
 
-void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn) const {
+void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn, bool values) const {
   const Impl& m = *impl_;
   const CoordBBox& r = m.roi_index;
+  const Coord first(r.min().x() & ~(kLeafDim - 1), r.min().y() & ~(kLeafDim - 1), r.min().z() & ~(kLeafDim - 1));
   std::vector<Coord> origins;
-  for (int x = r.min().x() & ~(kLeafDim - 1); x <= r.max().x(); x += kLeafDim)
-    for (int y = r.min().y() & ~(kLeafDim - 1); y <= r.max().y(); y += kLeafDim)
-      for (int z = r.min().z() & ~(kLeafDim - 1); z <= r.max().z(); z += kLeafDim) origins.emplace_back(x, y, z);
+  for (int x = first.x(); x <= r.max().x(); x += kLeafDim)
+    for (int y = first.y(); y <= r.max().y(); y += kLeafDim)
+      for (int z = first.z(); z <= r.max().z(); z += kLeafDim) origins.emplace_back(x, y, z);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, origins.size()), [&](const auto& range) {
     auto acc = m.grid->getConstAccessor();
     VoxelBlock b;
@@ -672,20 +673,32 @@ void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn)
       if (part.empty()) continue;
       const Coord lo = part.min();
       b.first_center = m.origin + m.h * Vec3(lo.x(), lo.y(), lo.z());
-      for (int k = 0; k < 3; ++k) b.n[k] = part.max()[k] - lo[k] + 1;
-      const LeafT* leaf = acc.probeConstLeaf(lo);
-      b.uniform = leaf == nullptr;
-      if (b.uniform) {
-        b.value = acc.getValue(lo);
-      } else {
-        for (int x = 0; x < b.n[0]; ++x)
-          for (int y = 0; y < b.n[1]; ++y)
-            for (int z = 0; z < b.n[2]; ++z)
-              b.values[(x * 8 + y) * 8 + z] = leaf->getValue(lo + Coord(x, y, z));
+      for (int k = 0; k < 3; ++k) {
+        b.n[k] = part.max()[k] - lo[k] + 1;
+        b.leaf[k] = (origins[i][k] - first[k]) / kLeafDim;
+      }
+      if (values) {
+        const LeafT* leaf = acc.probeConstLeaf(lo);
+        b.uniform = leaf == nullptr;
+        if (b.uniform) {
+          b.value = acc.getValue(lo);
+        } else {
+          for (int x = 0; x < b.n[0]; ++x)
+            for (int y = 0; y < b.n[1]; ++y)
+              for (int z = 0; z < b.n[2]; ++z)
+                b.values[(x * 8 + y) * 8 + z] = leaf->getValue(lo + Coord(x, y, z));
+        }
       }
       fn(b);
     }
   });
+}
+
+std::array<int, 3> Stock::roi_block_dims() const {
+  const CoordBBox& r = impl_->roi_index;
+  std::array<int, 3> d{};
+  for (int k = 0; k < 3; ++k) d[static_cast<std::size_t>(k)] = (r.max()[k] >> 3) - (r.min()[k] >> 3) + 1;
+  return d;
 }
 
 const Aabb& Stock::box() const { return impl_->box; }

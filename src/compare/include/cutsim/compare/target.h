@@ -4,6 +4,7 @@
 // angle-weighted pseudonormal of the closest feature (Baerentzen-Aanaes),
 // which is exact for closed, consistently oriented meshes.
 #include <memory>
+#include <optional>
 
 #include "cutsim/core/mesh.h"
 
@@ -21,6 +22,9 @@ public:
   /// Like signed_distance; exact within `radius`, and beyond it the
   /// unbounded query (faster when most points are near the surface).
   double signed_distance_within(const Vec3& p, double radius) const;
+  /// The signed distance when the surface lies within `radius` of `p`;
+  /// otherwise nothing (cheap: no unbounded search).
+  std::optional<double> signed_distance_if_within(const Vec3& p, double radius) const;
   /// Inside by ray parity (a cross-check for tests; not robust on edges).
   bool inside(const Vec3& p) const;
   /// For diagnosis: the closest triangle, its feature and point.

@@ -2,6 +2,7 @@
 // The workpiece: a box whose region of interest (ROI) is an OpenVDB
 // narrow-band level set; outside the ROI the stock stays its analytic box.
 // OpenVDB stays out of this header (see grid_access.h for the grid itself).
+#include <array>
 #include <cstddef>
 #include <functional>
 #include <memory>
@@ -27,6 +28,7 @@ struct StockOptions {
 struct VoxelBlock {
   Vec3 first_center;   ///< world position of voxel (0, 0, 0) of the block
   int n[3] = {0, 0, 0};///< voxels along x, y, z
+  int leaf[3] = {0, 0, 0};  ///< position in the ROI's block lattice (0 .. roi_block_dims() - 1)
   bool uniform = false;///< every voxel holds `value` (a tile: all material or all air)
   float value = 0;
   float values[512];   ///< level-set values, index (x * 8 + y) * 8 + z, when not uniform
@@ -81,7 +83,10 @@ public:
   double surface_height(double x, double y, double z_from) const;
   /// Calls `fn` for every block of the region of interest, in parallel;
   /// `fn` must be safe to call from several threads at once.
-  void for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn) const;
+  /// With `values` false, only the block's place and size are filled in.
+  void for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn, bool values = true) const;
+  /// Blocks of the region of interest along x, y, z (VoxelBlock::leaf).
+  std::array<int, 3> roi_block_dims() const;
   /// The deepest overlap of a region with the material at the voxel centres
   /// inside `bounds`: depth(p) = min(-region(p), -material(p)), where the
   /// material is the stock less what `removed` (a signed distance, may be
