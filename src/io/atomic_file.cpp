@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <utility>
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -13,32 +14,55 @@ namespace cutsim::io {
 
 namespace fs = std::filesystem;
 
-void write_file_atomic(const std::string& path, std::string_view bytes) {
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw OutputError(path, std::string("cannot create: ") + std::strerror(errno));
+AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), tmp_(path_ + ".tmp." + std::to_string(::getpid())) {
+  fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) throw OutputError(path_, std::string("cannot create: ") + std::strerror(errno));
+}
+
+AtomicFile::~AtomicFile() {
+  if (fd_ < 0) return;
+  ::close(fd_);
+  ::unlink(tmp_.c_str());
+}
+
+void AtomicFile::write(const void* data, std::size_t n) {
+  const auto* p = static_cast<const char*>(data);
   std::size_t done = 0;
-  while (done < bytes.size()) {
-    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
-    if (n < 0) {
+  while (done < n) {
+    const ssize_t k = ::write(fd_, p + done, n - done);
+    if (k < 0) {
       if (errno == EINTR) continue;
-      const int e = errno;
-      ::close(fd);
-      ::unlink(tmp.c_str());
-      throw OutputError(path, std::string("cannot write: ") + std::strerror(e));
+      throw OutputError(path_, std::string("cannot write: ") + std::strerror(errno));
     }
-    done += static_cast<std::size_t>(n);
+    done += static_cast<std::size_t>(k);
   }
-  if (::fsync(fd) != 0 || ::close(fd) != 0) {
+}
+
+void AtomicFile::commit() {
+  const int fd = fd_;
+  fd_ = -1;
+  if (::fsync(fd) != 0) {
     const int e = errno;
-    ::unlink(tmp.c_str());
-    throw OutputError(path, std::string("cannot write: ") + std::strerror(e));
+    ::close(fd);
+    ::unlink(tmp_.c_str());
+    throw OutputError(path_, std::string("cannot write: ") + std::strerror(e));
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+  if (::close(fd) != 0) {
     const int e = errno;
-    ::unlink(tmp.c_str());
-    throw OutputError(path, std::string("cannot rename into place: ") + std::strerror(e));
+    ::unlink(tmp_.c_str());
+    throw OutputError(path_, std::string("cannot write: ") + std::strerror(e));
   }
+  if (std::rename(tmp_.c_str(), path_.c_str()) != 0) {
+    const int e = errno;
+    ::unlink(tmp_.c_str());
+    throw OutputError(path_, std::string("cannot rename into place: ") + std::strerror(e));
+  }
+}
+
+void write_file_atomic(const std::string& path, std::string_view bytes) {
+  AtomicFile f(path);
+  f.write(bytes.data(), bytes.size());
+  f.commit();
 }
 
 void ensure_writable_directory(const std::string& dir) {

@@ -1,4 +1,5 @@
 #pragma once
+#include <cstddef>
 #include <string>
 #include <string_view>
 
@@ -8,6 +9,25 @@ namespace cutsim::io {
 /// place, so a crash or a full disk never leaves a truncated file.
 /// @throw OutputError naming the path and the system's reason.
 void write_file_atomic(const std::string& path, std::string_view bytes);
+
+/// The same, written piece by piece: the bytes go to a temporary file that
+/// commit() renames into place; destroyed uncommitted, it removes the
+/// temporary file and leaves `path` as it was.
+class AtomicFile {
+public:
+  /// @throw OutputError when the temporary file cannot be created.
+  explicit AtomicFile(std::string path);
+  ~AtomicFile();
+  AtomicFile(const AtomicFile&) = delete;
+  AtomicFile& operator=(const AtomicFile&) = delete;
+  /// @throw OutputError naming the path and the system's reason.
+  void write(const void* data, std::size_t n);
+  void commit();
+
+private:
+  std::string path_, tmp_;
+  int fd_ = -1;
+};
 
 /// Creates `dir` (and parents) if needed and checks that a file can be
 /// created in it; leaves nothing behind.
