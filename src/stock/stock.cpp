@@ -56,22 +56,38 @@ Coord ceil_coord(const Vec3& v) {
                static_cast<int>(std::ceil(v.z())));
 }
 
-// Calls leaf(origin) for each leaf-sized block of `bb`, visiting the
-// 128-voxel blocks whose centre (world) `keep_node` accepts.
-template <class KeepNode, class Leaf>
-void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, KeepNode keep_node, Leaf leaf) {
+// Calls leaf(origin) for each leaf-sized block of `bb`, going down through
+// the 128- and 32-voxel cubes that `keep(centre, half_diagonal)` accepts
+// (world centre; the half diagonal reaches the cube's farthest voxel centre).
+template <class Keep, class Leaf>
+void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep keep, Leaf leaf) {
+  constexpr int kMid = 32;
+  const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * h, hd2 = std::sqrt(3.0) * 0.5 * (kMid - 1) * h;
+  auto centre = [&](int x, int y, int z, int dim) {
+    return Vec3(origin + h * (Vec3(x, y, z).array() + 0.5 * (dim - 1)).matrix());
+  };
   const Coord q0(bb.min().x() & ~(kNode1Dim - 1), bb.min().y() & ~(kNode1Dim - 1), bb.min().z() & ~(kNode1Dim - 1));
   for (int x1 = q0.x(); x1 <= bb.max().x(); x1 += kNode1Dim)
     for (int y1 = q0.y(); y1 <= bb.max().y(); y1 += kNode1Dim)
       for (int z1 = q0.z(); z1 <= bb.max().z(); z1 += kNode1Dim) {
-        if (!keep_node(Vec3(origin + h * (Vec3(x1, y1, z1).array() + 0.5 * (kNode1Dim - 1)).matrix()))) continue;
+        if (!keep(centre(x1, y1, z1, kNode1Dim), hd1)) continue;
         CoordBBox part = CoordBBox::createCube(Coord(x1, y1, z1), kNode1Dim);
         part.intersect(bb);
         if (part.empty()) continue;
-        const Coord p0(part.min().x() & ~(kLeafDim - 1), part.min().y() & ~(kLeafDim - 1), part.min().z() & ~(kLeafDim - 1));
-        for (int x = p0.x(); x <= part.max().x(); x += kLeafDim)
-          for (int y = p0.y(); y <= part.max().y(); y += kLeafDim)
-            for (int z = p0.z(); z <= part.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
+        const Coord m0(part.min().x() & ~(kMid - 1), part.min().y() & ~(kMid - 1), part.min().z() & ~(kMid - 1));
+        for (int x2 = m0.x(); x2 <= part.max().x(); x2 += kMid)
+          for (int y2 = m0.y(); y2 <= part.max().y(); y2 += kMid)
+            for (int z2 = m0.z(); z2 <= part.max().z(); z2 += kMid) {
+              if (!keep(centre(x2, y2, z2, kMid), hd2)) continue;
+              CoordBBox mid = CoordBBox::createCube(Coord(x2, y2, z2), kMid);
+              mid.intersect(part);
+              if (mid.empty()) continue;
+              const Coord p0(mid.min().x() & ~(kLeafDim - 1), mid.min().y() & ~(kLeafDim - 1),
+                             mid.min().z() & ~(kLeafDim - 1));
+              for (int x = p0.x(); x <= mid.max().x(); x += kLeafDim)
+                for (int y = p0.y(); y <= mid.max().y(); y += kLeafDim)
+                  for (int z = p0.z(); z <= mid.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
+            }
       }
 }
 
@@ -286,7 +302,6 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   const double g = m.gamma;
   const double h = m.h;
   const double hd0 = std::sqrt(3.0) * 0.5 * (kLeafDim - 1) * h;
-  const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * h;
 
   // 1. Bin the pieces by leaf: (leaf, piece) keys for every leaf a
   //    piece's box (grown by the band) reaches, in parallel per piece.
@@ -319,7 +334,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             for (int z = bb.min().z() & ~7; z <= bb.max().z(); z += kLeafDim) out.push_back(keys.key(Coord(x, y, z), id));
       } else {
         for_each_leaf_block(
-            m.origin, h, bb, [&](const Vec3& c1) { return sweep::distance(p, c1) <= g + hd1; },
+            m.origin, h, bb, [&](const Vec3& c, double hd) { return sweep::distance(p, c) <= g + hd; },
             [&](const Coord& o) {
               const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
               if (sweep::distance(p, c0) <= g + hd0) out.push_back(keys.key(o, id));
@@ -525,7 +540,7 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   bb.intersect(m.roi_index);
   if (bb.empty()) return best;
   const double hd0 = std::sqrt(3.0) * 0.5 * (kLeafDim - 1) * m.h;
-  const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * m.h;
+  const double hq = std::sqrt(3.0) * 1.5 * m.h;  // 4^3 quarter: centre to its farthest voxel
   const auto& tree = m.grid->tree();
   // Blocks the region can reach (its distance is a lower bound outside),
   // skipping air tiles; with the region's distance at their centre.
@@ -536,7 +551,7 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   const Node1T* node = nullptr;
   Coord node_origin(std::numeric_limits<int>::max());
   bool node_air = false;
-  for_each_leaf_block(m.origin, m.h, bb, [&](const Vec3& c1) { return region(c1) <= hd1 - min_depth_mm; },
+  for_each_leaf_block(m.origin, m.h, bb, [&](const Vec3& c, double hd) { return region(c) <= hd - min_depth_mm; },
                       [&](const Coord& o) {
                         const Coord n1(o.x() & ~(kNode1Dim - 1), o.y() & ~(kNode1Dim - 1), o.z() & ~(kNode1Dim - 1));
                         if (n1 != node_origin) {
@@ -569,39 +584,58 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
       const float tile = leaf ? 0.0f : tree.getValue(o);
       double floor = std::max(min_depth_mm, local.depth_mm);
       if (-rc + hd0 <= floor) continue;
-      if (data) {
-        float lo = data[0];
-        for (int k = 1; k < 512; ++k) lo = std::min(lo, data[k]);
-        if (-static_cast<double>(lo) <= floor) continue;
-      } else if (-static_cast<double>(tile) <= floor) {
-        continue;
-      }
+      if (!data && -static_cast<double>(tile) <= floor) continue;
       const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
       CoordBBox part = CoordBBox::createCube(o, kLeafDim);
       part.intersect(bb);
-      for (int x = part.min().x(); x <= part.max().x(); ++x)
-        for (int y = part.min().y(); y <= part.max().y(); ++y)
-          for (int z = part.min().z(); z <= part.max().z(); ++z) {
-            double mat = data ? static_cast<double>(data[((x - o.x()) << 6) | ((y - o.y()) << 3) | (z - o.z())])
-                              : static_cast<double>(tile);
-            if (-mat <= floor) continue;
-            const Vec3 p = m.origin + m.h * Vec3(x, y, z);
-            if (-rc + (p - c0).norm() <= floor) continue;
-            const double rg = region(p);
-            if (-rg <= floor) continue;
-            if (removed) {
-              // The depth is at most what was removed here: below the best
-              // so far it cannot count, and `removed` may stop early.
-              const double r = removed(p, floor);
-              if (r <= floor) continue;
-              mat = std::max(mat, -r);
+      // Per 4^3 quarter: its deepest material, then the region at its
+      // centre, bound the depth of its voxels before any is evaluated.
+      for (int qx = 0; qx < kLeafDim; qx += 4)
+        for (int qy = 0; qy < kLeafDim; qy += 4)
+          for (int qz = 0; qz < kLeafDim; qz += 4) {
+            const Coord q0 = o.offsetBy(qx, qy, qz);
+            CoordBBox qb = CoordBBox::createCube(q0, 4);
+            qb.intersect(part);
+            if (qb.empty()) continue;
+            const Vec3 cq = m.origin + m.h * (Vec3(q0.x(), q0.y(), q0.z()).array() + 1.5).matrix();
+            if (-rc + (cq - c0).norm() + hq <= floor) continue;
+            if (data) {
+              // The whole 4^3 quarter (voxels outside `bb` only make the
+              // bound weaker); 16 rows of 4 in a tree, not one long chain.
+              float lo = std::numeric_limits<float>::max();
+              for (int x = 0; x < 4; ++x)
+                for (int y = 0; y < 4; ++y) {
+                  const float* r = data + (((qx + x) << 6) | ((qy + y) << 3) | qz);
+                  lo = std::min(lo, std::min(std::min(r[0], r[1]), std::min(r[2], r[3])));
+                }
+              if (-static_cast<double>(lo) <= floor) continue;
             }
-            const double depth = std::min(-rg, -mat);
-            if (depth > floor) {
-              local.depth_mm = depth;
-              local.where = p;
-              floor = depth;
-            }
+            const double rq = region(cq);
+            if (-rq + hq <= floor) continue;
+            for (int x = qb.min().x(); x <= qb.max().x(); ++x)
+              for (int y = qb.min().y(); y <= qb.max().y(); ++y)
+                for (int z = qb.min().z(); z <= qb.max().z(); ++z) {
+                  double mat = data ? static_cast<double>(data[((x - o.x()) << 6) | ((y - o.y()) << 3) | (z - o.z())])
+                                    : static_cast<double>(tile);
+                  if (-mat <= floor) continue;
+                  const Vec3 p = m.origin + m.h * Vec3(x, y, z);
+                  if (-rq + (p - cq).norm() <= floor) continue;
+                  const double rg = region(p);
+                  if (-rg <= floor) continue;
+                  if (removed) {
+                    // The depth is at most what was removed here: below the
+                    // best so far it cannot count, and `removed` may stop early.
+                    const double r = removed(p, floor);
+                    if (r <= floor) continue;
+                    mat = std::max(mat, -r);
+                  }
+                  const double depth = std::min(-rg, -mat);
+                  if (depth > floor) {
+                    local.depth_mm = depth;
+                    local.where = p;
+                    floor = depth;
+                  }
+                }
           }
       if (local.depth_mm >= cap) saturated = true;
     }
