@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 #include <tiny_gltf.h>
 
+#include "cutsim/compare/compare.h"
 #include "cutsim/core/error.h"
 #include "cutsim/io/mesh_io.h"
 #include "helpers.h"
@@ -153,6 +154,38 @@ TEST(Compare, SlotCutTooDeepOverHalfItsLengthIsOvercutOfTheClosedForm) {
   std::string vout;
   EXPECT_EQ(run_cli_raw(cmd, &vout), 0) << vout;
   EXPECT_NE(vout.find(": 0 errors"), std::string::npos) << vout;
+}
+
+// Large regions are drawn on a coarser grid; the volumes stay the voxels'.
+TEST(Compare, CoarseRegionMeshesKeepTheVolumesAndCoverTheFineRegion) {
+  TempDir dir;
+  auto r = run_program(dir, "G0 X-2 Y0 Z1\nG1 Z-0.105 F100\nG1 X3\nG1 Z-0.1\nG1 X8\nG0 Z1\n", "flat:d=2",
+                       Aabb{Vec3(0, -2, -1), Vec3(6, 2, 0)}, kH);
+  const compare::Target target(slotted_block());
+  const TriMesh machined = r.stock->surface_mesh();
+  const compare::CompareResult fine = compare::compare(*r.stock, target, machined, {0.001});
+  compare::CompareOptions coarse_opt{0.001};
+  coarse_opt.region_block_budget = 1;  // every region is "large": the coarsest grid, 8 voxels
+  const compare::CompareResult coarse = compare::compare(*r.stock, target, machined, coarse_opt);
+  EXPECT_DOUBLE_EQ(fine.region_mesh_voxel_mm, kH);
+  EXPECT_DOUBLE_EQ(coarse.region_mesh_voxel_mm, 8 * kH);
+  EXPECT_EQ(coarse.overcut_volume_mm3, fine.overcut_volume_mm3);
+  EXPECT_EQ(coarse.undercut_volume_mm3, fine.undercut_volume_mm3);
+  EXPECT_NEAR(fine.overcut_volume_mm3, 0.005 * kFootprint, 0.05 * kH * 2 * kFootprint);
+  // Drawn coarse, the region moves by less than a cell (8 voxels; 0.74 cell
+  // measured): each mesh's vertices (a sample) lie near the other's, both ways.
+  ASSERT_FALSE(coarse.overcut_mesh.triangles.empty());
+  auto nearest = [](const Vec3& p, const TriMesh& m) {
+    double best = 1e300;
+    for (const Vec3& q : m.positions) best = std::min(best, (q - p).squaredNorm());
+    return std::sqrt(best);
+  };
+  const double cell = 8 * kH;
+  for (std::size_t i = 0; i < fine.overcut_mesh.positions.size(); i += 97)
+    ASSERT_LT(nearest(fine.overcut_mesh.positions[i], coarse.overcut_mesh), cell) << "fine vertex " << i;
+  for (std::size_t i = 0; i < coarse.overcut_mesh.positions.size(); i += 97)
+    ASSERT_LT(nearest(coarse.overcut_mesh.positions[i], fine.overcut_mesh), cell) << "coarse vertex " << i;
+  EXPECT_LT(coarse.overcut_mesh.positions.size(), fine.overcut_mesh.positions.size() / 4);
 }
 
 TEST(Compare, SlotCutTooShallowOverHalfItsLengthIsUndercutOfTheClosedForm) {

@@ -33,8 +33,11 @@ std::vector<io::GltfPart> comparison_parts(const compare::CompareResult& c, io::
                                        "_DEVIATION: signed distance to the target in mm, + undercut, - overcut"}};
   gopt.extras_number = {{"tolerance_mm", tol}, {"max_overcut_mm", c.max_overcut_mm},
                         {"max_undercut_mm", c.max_undercut_mm}};
-  return {surface, io::GltfPart{"overcut", &c.overcut_mesh, {0.85f, 0.05f, 0.05f, 1.0f}},
-          io::GltfPart{"undercut", &c.undercut_mesh, {0.05f, 0.1f, 0.85f, 1.0f}}};
+  io::GltfPart over{"overcut", &c.overcut_mesh, {0.85f, 0.05f, 0.05f, 1.0f}};
+  io::GltfPart under{"undercut", &c.undercut_mesh, {0.05f, 0.1f, 0.85f, 1.0f}};
+  // Drawn on a coarser grid than the stock's when the regions are large.
+  over.extras_number = under.extras_number = {{"mesh_voxel_mm", c.region_mesh_voxel_mm}};
+  return {surface, over, under};
 }
 
 }  // namespace cutsim::app

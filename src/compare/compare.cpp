@@ -17,33 +17,57 @@ namespace cutsim::compare {
 namespace {
 double fraction(double d, double h) { return std::clamp(0.5 - d / h, 0.0, 1.0); }
 
-// A region's level set over the blocks where it exists, meshed.
+// A region's level set over the blocks where it exists, clamped to +-h and
+// kept in 8 bits (it is only drawn; the volumes are summed before).
 struct RegionBlock {
-  openvdb::Coord origin;
+  openvdb::Coord origin;  // voxel index from the ROI lattice's origin (>= 0)
   int n[3];
-  float v[512];
+  std::int8_t v[512];
 };
 
-TriMesh mesh_region(const std::vector<RegionBlock>& blocks, const Vec3& origin, double h) {
+std::int8_t quantize(double v, double h) {
+  return static_cast<std::int8_t>(std::lround(std::clamp(v / h, -1.0, 1.0) * 127));
+}
+
+// Meshes the region on cells of k x k x k voxels (k a power of two up to
+// 8, so a block's cells stay in its lattice cell): a cell's value is the
+// least of its voxels', so any voxel in the region keeps its cell in.
+TriMesh mesh_region(const std::vector<RegionBlock>& blocks, const Vec3& lattice_origin, double h, int k) {
   TriMesh out;
   if (blocks.empty()) return out;
   openvdb::initialize();
+  const double hk = h * k;
   auto grid = openvdb::FloatGrid::create(static_cast<float>(h));
-  grid->setTransform(openvdb::math::Transform::createLinearTransform(h));
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(hk));
   auto acc = grid->getAccessor();
+  const int shift = k == 1 ? 0 : k == 2 ? 1 : k == 4 ? 2 : 3;
   for (const auto& b : blocks) {
-    // Blocks are leaf-aligned in the stock's lattice, not necessarily in
-    // this grid's: set voxels through the accessor.
+    float cell[512];
+    std::fill(std::begin(cell), std::end(cell), std::numeric_limits<float>::max());
+    const openvdb::Coord c0(b.origin.x() >> shift, b.origin.y() >> shift, b.origin.z() >> shift);
+    openvdb::Coord c1 = c0;
     for (int x = 0; x < b.n[0]; ++x)
       for (int y = 0; y < b.n[1]; ++y)
-        for (int z = 0; z < b.n[2]; ++z) acc.setValue(b.origin.offsetBy(x, y, z), b.v[(x * 8 + y) * 8 + z]);
+        for (int z = 0; z < b.n[2]; ++z) {
+          const openvdb::Coord c((b.origin.x() + x) >> shift, (b.origin.y() + y) >> shift, (b.origin.z() + z) >> shift);
+          c1.maxComponent(c);
+          const int i = ((c.x() - c0.x()) * 8 + (c.y() - c0.y())) * 8 + (c.z() - c0.z());
+          cell[i] = std::min(cell[i], static_cast<float>(b.v[(x * 8 + y) * 8 + z] * (h / 127)));
+        }
+    for (int x = c0.x(); x <= c1.x(); ++x)
+      for (int y = c0.y(); y <= c1.y(); ++y)
+        for (int z = c0.z(); z <= c1.z(); ++z)
+          acc.setValue(openvdb::Coord(x, y, z), cell[((x - c0.x()) * 8 + (y - c0.y())) * 8 + (z - c0.z())]);
   }
   std::vector<openvdb::Vec3s> pts;
   std::vector<openvdb::Vec3I> tris;
   std::vector<openvdb::Vec4I> quads;
   // Meshed at +h/4 so that a region thinner than a voxel still shows.
   openvdb::tools::volumeToMesh(*grid, pts, tris, quads, 0.25 * h, 0.0);
+  const Vec3 origin = lattice_origin + Vec3::Constant(0.5 * (k - 1) * h);  // centre of cell (0, 0, 0)
+  out.positions.reserve(pts.size());
   for (const auto& p : pts) out.positions.push_back(origin + Vec3(p.x(), p.y(), p.z()));
+  out.triangles.reserve(tris.size() + 2 * quads.size());
   for (const auto& t : tris) out.triangles.push_back({t[0], t[2], t[1]});
   for (const auto& q : quads) {
     out.triangles.push_back({q[0], q[2], q[1]});
@@ -213,7 +237,7 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
   std::vector<Sum> sums;
   std::vector<RegionBlock> over_blocks, under_blocks;
   std::mutex mu;
-  const Vec3 grid_origin = (stock.roi().min / h).array().round().matrix() * h;
+  const Vec3 lattice = stock.roi_lattice_origin();
   stock.for_each_roi_block([&](const stock::VoxelBlock& b) {
     const std::size_t bi = tb.index(b.leaf);
     const double dc = tb.d[bi];
@@ -235,11 +259,11 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
           over += std::max(0.0, ft - fs);
           under += std::max(0.0, fs - ft);
           const double cs = std::clamp(ds, -h, h);
-          ro.v[i] = static_cast<float>(std::max<double>(dt[i], -cs));
-          ru.v[i] = static_cast<float>(std::max<double>(cs, -dt[i]));
+          ro.v[i] = quantize(std::max<double>(dt[i], -cs), h);
+          ru.v[i] = quantize(std::max<double>(cs, -dt[i]), h);
         }
     if (over == 0 && under == 0) return;
-    const Vec3 idx = (b.first_center - grid_origin) / h;
+    const Vec3 idx = (b.first_center - lattice) / h;
     ro.origin = ru.origin = openvdb::Coord(static_cast<int>(std::lround(idx.x())), static_cast<int>(std::lround(idx.y())),
                                            static_cast<int>(std::lround(idx.z())));
     for (int k = 0; k < 3; ++k) ro.n[k] = ru.n[k] = b.n[k];
@@ -254,8 +278,13 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
   auto by_origin = [](const RegionBlock& a, const RegionBlock& b) { return a.origin < b.origin; };
   std::sort(over_blocks.begin(), over_blocks.end(), by_origin);
   std::sort(under_blocks.begin(), under_blocks.end(), by_origin);
-  r.overcut_mesh = mesh_region(over_blocks, grid_origin, h);
-  r.undercut_mesh = mesh_region(under_blocks, grid_origin, h);
+  // A region's blocks on a k-voxel grid number about blocks / k^2 (regions
+  // are mostly layers along the surface).
+  int k = 1;
+  while (k < 8 && (over_blocks.size() + under_blocks.size()) > opt.region_block_budget * static_cast<std::size_t>(k * k)) k *= 2;
+  r.region_mesh_voxel_mm = k * h;
+  r.overcut_mesh = mesh_region(over_blocks, lattice, h, k);
+  r.undercut_mesh = mesh_region(under_blocks, lattice, h, k);
   const double hv = h * h * h;
   for (const Sum& s : sums) {
     r.overcut_volume_mm3 += s.over * hv;

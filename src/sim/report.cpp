@@ -19,7 +19,8 @@ std::vector<std::pair<std::string, double>> comparison_fields(const compare::Com
   return {{"overcut_volume_mm3", c.overcut_volume_mm3},   {"undercut_volume_mm3", c.undercut_volume_mm3},
           {"overcut_volume_um3", c.overcut_volume_mm3 * 1e9}, {"undercut_volume_um3", c.undercut_volume_mm3 * 1e9},
           {"max_overcut_mm", c.max_overcut_mm},           {"max_undercut_mm", c.max_undercut_mm},
-          {"tolerance_mm", c.tolerance_mm},               {"fraction_in_tolerance", c.fraction_in_tolerance}};
+          {"tolerance_mm", c.tolerance_mm},               {"fraction_in_tolerance", c.fraction_in_tolerance},
+          {"region_mesh_voxel_mm", c.region_mesh_voxel_mm}};
 }
 
 std::string comparison_text(const compare::CompareResult& c) {

@@ -728,6 +728,12 @@ void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn,
   });
 }
 
+Vec3 Stock::roi_lattice_origin() const {
+  const Impl& m = *impl_;
+  const CoordBBox& r = m.roi_index;
+  return m.index_to_world(Coord(r.min().x() & ~(kLeafDim - 1), r.min().y() & ~(kLeafDim - 1), r.min().z() & ~(kLeafDim - 1)));
+}
+
 std::array<int, 3> Stock::roi_block_dims() const {
   const CoordBBox& r = impl_->roi_index;
   std::array<int, 3> d{};

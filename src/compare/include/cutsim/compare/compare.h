@@ -11,6 +11,11 @@ namespace cutsim::compare {
 
 struct CompareOptions {
   double tolerance_mm = 0.001;  ///< deviations within +-tolerance count as in tolerance
+  /// The volumes always come from the stock's voxels. The region meshes are
+  /// drawn on a grid 1, 2, 4 or 8 voxels wide, the finest that keeps them
+  /// within about this many blocks of its own (16384: some 2M vertices); a
+  /// coarse cell is in a region if any of its voxels is (nothing vanishes).
+  std::size_t region_block_budget = 16384;
 };
 
 struct CompareResult {
@@ -30,6 +35,9 @@ struct CompareResult {
   /// The overcut and undercut regions as closed meshes (zero sets of
   /// max(d_target, -d_stock) and max(d_stock, -d_target) on the voxels).
   TriMesh overcut_mesh, undercut_mesh;
+  /// Voxel size the region meshes were drawn at, mm: the stock's, or a
+  /// multiple of it when the regions are large (see compare()).
+  double region_mesh_voxel_mm = 0;
 };
 
 CompareResult compare(const stock::Stock& stock, const Target& target, const TriMesh& machined,

@@ -87,6 +87,9 @@ public:
   void for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn, bool values = true) const;
   /// Blocks of the region of interest along x, y, z (VoxelBlock::leaf).
   std::array<int, 3> roi_block_dims() const;
+  /// World centre of the first voxel of block lattice cell (0, 0, 0): a
+  /// block's voxel (x, y, z) lies at this + h * (8 * leaf + offset + (x, y, z)).
+  Vec3 roi_lattice_origin() const;
   /// The deepest overlap of a region with the material at the voxel centres
   /// inside `bounds`: depth(p) = min(-region(p), -material(p)), where the
   /// material is the stock less what `removed` (a signed distance, may be
