@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <limits>
 #include <mutex>
+#include <optional>
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/VolumeToMesh.h>
@@ -26,7 +27,7 @@ struct RegionBlock {
 };
 
 std::int8_t quantize(double v, double h) {
-  return static_cast<std::int8_t>(std::lround(std::clamp(v / h, -1.0, 1.0) * 127));
+  return static_cast<std::int8_t>(std::floor(std::clamp(v / h, -1.0, 1.0) * 127 + 0.5));
 }
 
 // Meshes the region on cells of k x k x k voxels (k a power of two up to
@@ -169,16 +170,34 @@ void block_target_distances(const stock::VoxelBlock& b, const Vec3& centre, doub
                             double h, float* dt) {
   constexpr float kUnknown = std::numeric_limits<float>::quiet_NaN();
   const float hf = static_cast<float>(h);
+  // First per 4^3 quarter (centre to farthest voxel hq): with no surface
+  // within hq + 1.5h of its centre, none is within 1.5h of its voxels; with
+  // |d| >= hq + h there, all its voxels are saturated.
+  const double hq = std::sqrt(3.0) * 1.5 * h;
+  std::array<std::optional<double>, 8> dq;
+  std::array<bool, 8> quarter_far{};
+  for (int q = 0; q < 8; ++q) {
+    const int qx = (q >> 2) * 4, qy = ((q >> 1) & 1) * 4, qz = (q & 1) * 4;
+    if (qx >= b.n[0] || qy >= b.n[1] || qz >= b.n[2]) continue;
+    const Vec3 cq = b.first_center + h * Vec3(qx + 1.5, qy + 1.5, qz + 1.5);
+    if ((cq - centre).norm() + hq <= std::fabs(dc) - h) continue;  // saturated from the block's centre
+    dq[static_cast<std::size_t>(q)] = target.signed_distance_if_within(cq, hq + 1.5 * h);
+    quarter_far[static_cast<std::size_t>(q)] = !dq[static_cast<std::size_t>(q)];
+  }
   int unknown = 0;
   for (int x = 0; x < b.n[0]; ++x)
     for (int y = 0; y < b.n[1]; ++y)
       for (int z = 0; z < b.n[2]; ++z) {
         const int i = (x * 8 + y) * 8 + z;
+        const auto q = static_cast<std::size_t>(((x >> 2) << 2) | ((y >> 2) << 1) | (z >> 2));
         const Vec3 p = b.first_center + h * Vec3(x, y, z);
         const double r = (p - centre).norm();
         if (r <= std::fabs(dc) - h) {
           dt[i] = dc < 0 ? -hf : hf;
-        } else if (const auto d = target.signed_distance_if_within(p, 1.5 * h)) {
+        } else if (dq[q] && (p - (b.first_center + h * Vec3((x & ~3) + 1.5, (y & ~3) + 1.5, (z & ~3) + 1.5))).norm() <=
+                                std::fabs(*dq[q]) - h) {
+          dt[i] = *dq[q] < 0 ? -hf : hf;
+        } else if (const auto d = quarter_far[q] ? std::nullopt : target.signed_distance_if_within(p, 1.5 * h)) {
           dt[i] = static_cast<float>(std::clamp(*d, -h, h));
         } else if (r <= h) {
           dt[i] = dc < 0 ? -hf : hf;  // the centre lies in this voxel's empty ball
@@ -243,26 +262,33 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
     const double dc = tb.d[bi];
     float dt[512];
     if (tb.state[bi] == 1 || std::fabs(dc) >= hd + h) {
+      // Both uniform on the same side (material under material, air in air):
+      // nothing to count or draw.
+      if (b.uniform && (b.value < 0) == (dc < 0) && std::fabs(b.value) >= 0.5 * h) return;
       std::fill(std::begin(dt), std::end(dt), static_cast<float>(dc < 0 ? -h : h));
     } else {
       block_target_distances(b, tb.centre[bi], dc, target, h, dt);
     }
     double over = 0, under = 0;
+    for (int x = 0; x < b.n[0]; ++x)
+      for (int y = 0; y < b.n[1]; ++y)
+        for (int z = 0; z < b.n[2]; ++z) {
+          const int i = (x * 8 + y) * 8 + z;
+          const double fs = fraction(b.uniform ? b.value : b.values[i], h);
+          const double ft = fraction(dt[i], h);
+          over += std::max(0.0, ft - fs);
+          under += std::max(0.0, fs - ft);
+        }
+    if (over == 0 && under == 0) return;  // most blocks: stock and target agree
     RegionBlock ro, ru;
     for (int x = 0; x < b.n[0]; ++x)
       for (int y = 0; y < b.n[1]; ++y)
         for (int z = 0; z < b.n[2]; ++z) {
           const int i = (x * 8 + y) * 8 + z;
-          const double ds = b.uniform ? b.value : b.values[i];
-          const double fs = fraction(ds, h);
-          const double ft = fraction(dt[i], h);
-          over += std::max(0.0, ft - fs);
-          under += std::max(0.0, fs - ft);
-          const double cs = std::clamp(ds, -h, h);
+          const double cs = std::clamp<double>(b.uniform ? b.value : b.values[i], -h, h);
           ro.v[i] = quantize(std::max<double>(dt[i], -cs), h);
           ru.v[i] = quantize(std::max<double>(cs, -dt[i]), h);
         }
-    if (over == 0 && under == 0) return;
     const Vec3 idx = (b.first_center - lattice) / h;
     ro.origin = ru.origin = openvdb::Coord(static_cast<int>(std::lround(idx.x())), static_cast<int>(std::lround(idx.y())),
                                            static_cast<int>(std::lround(idx.z())));
