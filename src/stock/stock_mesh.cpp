@@ -2,6 +2,8 @@
 // analytic box faces outside the ROI.
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/VolumeToMesh.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include "stock_impl.h"
 
@@ -121,9 +123,9 @@ TriMesh Stock::surface_mesh(double adaptivity) const {
   }
   // Normals from the level set's gradient (central differences, trilinear).
   mesh.normals.resize(mesh.positions.size());
-  {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.positions.size(), 4096), [&](const auto& range) {
     auto acc = m.grid->getConstAccessor();
-    for (std::size_t i = 0; i < mesh.positions.size(); ++i) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const Vec3 q = (mesh.positions[i] - m.origin) / m.h;
       Vec3 gr;
       for (int k = 0; k < 3; ++k) {
@@ -135,7 +137,7 @@ TriMesh Stock::surface_mesh(double adaptivity) const {
       const double n = gr.norm();
       mesh.normals[i] = n > 0 ? Eigen::Vector3f((gr / n).cast<float>()) : Eigen::Vector3f(0, 0, 1);
     }
-  }
+  });
 
   // Analytic faces of the box outside the ROI.
   const Aabb& b = m.box;
