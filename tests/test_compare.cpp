@@ -188,6 +188,29 @@ TEST(Compare, CoarseRegionMeshesKeepTheVolumesAndCoverTheFineRegion) {
   EXPECT_LT(coarse.overcut_mesh.positions.size(), fine.overcut_mesh.positions.size() / 4);
 }
 
+// A target whose surface is nowhere near the region of interest (a block
+// whose top is 0.5 mm down): every block's sign comes from one unbounded
+// query and the flood, and all the stock left in the region is undercut.
+TEST(Compare, TargetFarBelowTheCutMakesAllTheStockInTheRegionUndercut) {
+  TempDir dir;
+  auto r = run_program(dir, "G0 X-2 Y0 Z1\nG1 Z-0.1 F100\nG1 X8\nG0 Z1\n", "flat:d=2", Aabb{Vec3(0, -2, -1), Vec3(6, 2, 0)},
+                       kH);
+  TriMesh block;
+  for (int i = 0; i < 8; ++i) block.positions.emplace_back(i & 1 ? 10 : -10, i & 2 ? 10 : -10, i & 4 ? -0.5 : -10);
+  block.triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                     {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+  if (block.signed_volume() < 0)
+    for (auto& t : block.triangles) std::swap(t[1], t[2]);
+  const Aabb roi = r.stock->roi();
+  ASSERT_GT(roi.min.z(), -0.5 + 0.1) << "the region must stay clear of the target's top";
+  const compare::Target target(std::move(block));
+  const compare::CompareResult c = compare::compare(*r.stock, target, r.stock->surface_mesh(), {0.001});
+  const Aabb in_stock = roi.intersected(r.stock->box());
+  const double left = in_stock.volume() - 2.0 * 6.0 * 0.1;  // the region's stock less the slot through it
+  EXPECT_EQ(c.overcut_volume_mm3, 0.0);
+  EXPECT_NEAR(c.undercut_volume_mm3, left, 0.05 * kH * 2 * in_stock.size().x() * in_stock.size().y());
+}
+
 TEST(Compare, SlotCutTooShallowOverHalfItsLengthIsUndercutOfTheClosedForm) {
   TempDir dir;
   const SlotRun r = cut_slot(dir, 0.095);

@@ -90,7 +90,6 @@ struct TargetBlocks {
   std::array<int, 3> dims{};
   std::vector<float> d;           // signed distance at the centre; far: +-far_value
   std::vector<std::int8_t> state; // 0 far and unsigned, 1 far and signed, 2 known
-  std::vector<Vec3> centre;
   float far_value = 0;
 
   std::size_t index(const int* l) const {
@@ -105,13 +104,11 @@ TargetBlocks classify_blocks(const stock::Stock& stock, const Target& target, do
   const std::size_t n = static_cast<std::size_t>(tb.dims[0]) * tb.dims[1] * tb.dims[2];
   tb.d.assign(n, 0.0f);
   tb.state.assign(n, -1);  // -1: not in the ROI (never visited)
-  tb.centre.assign(n, Vec3::Zero());
   tb.far_value = static_cast<float>(reach);
   stock.for_each_roi_block(
       [&](const stock::VoxelBlock& b) {
         const std::size_t i = tb.index(b.leaf);
         const Vec3 c = b.first_center + 0.5 * h * Vec3(b.n[0] - 1, b.n[1] - 1, b.n[2] - 1);
-        tb.centre[i] = c;
         if (const auto d = target.signed_distance_if_within(c, reach)) {
           tb.d[i] = static_cast<float>(*d);
           tb.state[i] = 2;
@@ -149,9 +146,16 @@ TargetBlocks classify_blocks(const stock::Stock& stock, const Target& target, do
     }
   };
   spread();
+  // A far region with no known neighbour: one unbounded query, at the
+  // centre of its lattice cell (within 3.5h sqrt 3 < reach of the block's
+  // own centre, so on the same side).
+  const Vec3 lattice = stock.roi_lattice_origin();
   for (std::size_t i = 0; i < n; ++i) {
     if (tb.state[i] != 0) continue;
-    tb.d[i] = target.signed_distance(tb.centre[i]) < 0 ? -tb.far_value : tb.far_value;
+    const std::size_t l[3] = {i / stride[0], (i / stride[1]) % static_cast<std::size_t>(tb.dims[1]),
+                              i % static_cast<std::size_t>(tb.dims[2])};
+    const Vec3 p = lattice + h * (8.0 * Vec3(double(l[0]), double(l[1]), double(l[2])) + Vec3::Constant(3.5));
+    tb.d[i] = target.signed_distance(p) < 0 ? -tb.far_value : tb.far_value;
     tb.state[i] = 1;
     queue.push_back(i);
     spread();
@@ -267,7 +271,7 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
       if (b.uniform && (b.value < 0) == (dc < 0) && std::fabs(b.value) >= 0.5 * h) return;
       std::fill(std::begin(dt), std::end(dt), static_cast<float>(dc < 0 ? -h : h));
     } else {
-      block_target_distances(b, tb.centre[bi], dc, target, h, dt);
+      block_target_distances(b, b.first_center + 0.5 * h * Vec3(b.n[0] - 1, b.n[1] - 1, b.n[2] - 1), dc, target, h, dt);
     }
     double over = 0, under = 0;
     for (int x = 0; x < b.n[0]; ++x)

@@ -694,22 +694,24 @@ void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn,
   const Impl& m = *impl_;
   const CoordBBox& r = m.roi_index;
   const Coord first(r.min().x() & ~(kLeafDim - 1), r.min().y() & ~(kLeafDim - 1), r.min().z() & ~(kLeafDim - 1));
-  std::vector<Coord> origins;
-  for (int x = first.x(); x <= r.max().x(); x += kLeafDim)
-    for (int y = first.y(); y <= r.max().y(); y += kLeafDim)
-      for (int z = first.z(); z <= r.max().z(); z += kLeafDim) origins.emplace_back(x, y, z);
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, origins.size()), [&](const auto& range) {
+  // The lattice by index, not as a list: a large ROI has tens of millions of blocks.
+  const std::array<int, 3> dims = roi_block_dims();
+  const std::size_t count = static_cast<std::size_t>(dims[0]) * dims[1] * dims[2];
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count), [&](const auto& range) {
     auto acc = m.grid->getConstAccessor();
     VoxelBlock b;
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      CoordBBox part = CoordBBox::createCube(origins[i], kLeafDim);
+      const int l[3] = {static_cast<int>(i / (static_cast<std::size_t>(dims[1]) * dims[2])),
+                        static_cast<int>((i / dims[2]) % dims[1]), static_cast<int>(i % dims[2])};
+      const Coord origin = first.offsetBy(l[0] * kLeafDim, l[1] * kLeafDim, l[2] * kLeafDim);
+      CoordBBox part = CoordBBox::createCube(origin, kLeafDim);
       part.intersect(r);
       if (part.empty()) continue;
       const Coord lo = part.min();
       b.first_center = m.origin + m.h * Vec3(lo.x(), lo.y(), lo.z());
       for (int k = 0; k < 3; ++k) {
         b.n[k] = part.max()[k] - lo[k] + 1;
-        b.leaf[k] = (origins[i][k] - first[k]) / kLeafDim;
+        b.leaf[k] = l[k];
       }
       if (values) {
         const LeafT* leaf = acc.probeConstLeaf(lo);
