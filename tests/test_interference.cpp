@@ -11,6 +11,8 @@
 #include "cutsim/sim/interference.h"
 #include "helpers.h"
 
+#include <tbb/task_arena.h>
+
 namespace cutsim::test {
 namespace {
 
@@ -153,6 +155,29 @@ TEST(Interference, MovesOfOneBatchSeeTheMaterialTheEarlierOnesRemoved) {
   bool line4 = false;
   for (const auto& c : bare.contacts) line4 |= c.line == 4 && c.region == "shank";
   EXPECT_TRUE(line4);
+}
+
+TEST(Interference, DeepestPointIsTheSameWhateverTheThreads) {
+  // A region sunk into the block reaches the band's depth (the depth
+  // saturates) in hundreds of blocks at once: the point reported must not
+  // depend on which thread got there first, or reports do not repeat.
+  const Aabb box{Vec3(0, 0, -1), Vec3(2, 2, 0)};
+  stock::StockOptions so;
+  so.voxel_mm = 0.01;
+  const stock::Stock s(box, box, so);
+  const Aabb region{Vec3(0.2, 0.2, -0.9), Vec3(1.8, 1.8, 0.1)};
+  auto sd = [&](const Vec3& x) { return box_signed_distance(region, x); };
+  stock::Overlap one;
+  tbb::task_arena(1).execute([&] { one = s.overlap(region, sd, nullptr, 0.0); });
+  ASSERT_TRUE(one.at_least);
+  EXPECT_NEAR(one.depth_mm, s.band_mm(), 1e-6 * s.band_mm());
+  for (int rep = 0; rep < 20; ++rep) {
+    stock::Overlap two;
+    tbb::task_arena(2).execute([&] { two = s.overlap(region, sd, nullptr, 0.0); });
+    EXPECT_EQ(two.depth_mm, one.depth_mm);
+    EXPECT_EQ(two.where, one.where) << "run " << rep << ": (" << two.where.transpose() << ") instead of ("
+                                    << one.where.transpose() << ")";
+  }
 }
 
 TEST(Interference, RapidThroughTheStockIsFlaggedAndARapidAboveIsNot) {

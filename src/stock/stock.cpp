@@ -56,6 +56,32 @@ Coord ceil_coord(const Vec3& v) {
                static_cast<int>(std::ceil(v.z())));
 }
 
+// Smallest value of a leaf's 512 (x-major) values. Lanes of 8 kept apart
+// and `a < b ? a : b` (what a vector min does) let the compiler vectorise;
+// one running std::min is a serial chain of 511 compares.
+float leaf_min(const float* v) {
+  float lane[8];
+  for (int k = 0; k < 8; ++k) lane[k] = v[k];
+  for (int i = 8; i < 512; i += 8)
+    for (int k = 0; k < 8; ++k) lane[k] = v[i + k] < lane[k] ? v[i + k] : lane[k];
+  float lo = lane[0];
+  for (int k = 1; k < 8; ++k) lo = std::min(lo, lane[k]);
+  return lo;
+}
+
+// Smallest value of the 4^3 quarter of a leaf at offset (qx, qy, qz), the
+// same way: 16 rows of 4 into 4 lanes.
+float quarter_min(const float* data, int qx, int qy, int qz) {
+  const float* r0 = data + ((qx << 6) | (qy << 3) | qz);
+  float lane[4] = {r0[0], r0[1], r0[2], r0[3]};
+  for (int x = 0; x < 4; ++x)
+    for (int y = 0; y < 4; ++y) {
+      const float* r = r0 + ((x << 6) | (y << 3));
+      for (int k = 0; k < 4; ++k) lane[k] = r[k] < lane[k] ? r[k] : lane[k];
+    }
+  return std::min(std::min(lane[0], lane[1]), std::min(lane[2], lane[3]));
+}
+
 // Calls leaf(origin) for each leaf-sized block of `bb`, going down through
 // the 128- and 32-voxel cubes that `keep(centre, half_diagonal)` accepts
 // (world centre; the half diagonal reaches the cube's farthest voxel centre).
@@ -390,10 +416,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       const LeafT* leaf = tree.probeConstLeaf(o);
       double vmin;
       if (leaf) {
-        const float* v = leaf->buffer().data();
-        float lo = v[0];
-        for (int i = 1; i < 512; ++i) lo = std::min(lo, v[i]);
-        vmin = lo;
+        vmin = leaf_min(leaf->buffer().data());
       } else {
         vmin = tree.getValue(o);
         if (vmin > 0) continue;  // air tile
@@ -466,10 +489,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       // at its centre bound its voxels' more tightly than the leaf's.
       for (int sb = 0; sb < 8; ++sb) {
         const int bx = (sb >> 2) * 4, by = ((sb >> 1) & 1) * 4, bz = (sb & 1) * 4;
-        float vmin = m.gamma;
-        for (int ix = bx; ix < bx + 4; ++ix)
-          for (int iy = by; iy < by + 4; ++iy)
-            for (int iz = bz; iz < bz + 4; ++iz) vmin = std::min(vmin, data[(ix << 6) | (iy << 3) | iz]);
+        const float vmin = quarter_min(data, bx, by, bz);
         if (vmin >= m.gamma) continue;  // all air: stays air
         air = false;
         const double need_max = -static_cast<double>(vmin);  // the largest -v here
@@ -568,7 +588,11 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
                       });
   if (blocks.empty()) return best;
   std::mutex mu;
-  std::atomic<bool> saturated{false};
+  // The result must not depend on how the threads share the blocks: of
+  // equal depths the first block (in their fixed order) wins, and once a
+  // block saturates only the blocks before it are still scanned.
+  std::atomic<std::size_t> first_saturated{std::numeric_limits<std::size_t>::max()};
+  std::size_t best_block = std::numeric_limits<std::size_t>::max();
   const double cap = m.gamma * (1 - 1e-6);
   // The region's distance is 1-Lipschitz, so its depth at a voxel is at
   // most the centre's depth plus the voxel's offset: voxels (and blocks)
@@ -576,7 +600,8 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   // so far are passed over without evaluating the region.
   auto scan = [&](std::size_t i0, std::size_t i1) {
     Overlap local;
-    for (std::size_t i = i0; i != i1 && !saturated.load(std::memory_order_relaxed); ++i) {
+    std::size_t local_block = 0;
+    for (std::size_t i = i0; i != i1 && i < first_saturated.load(std::memory_order_relaxed); ++i) {
       const Coord o = blocks[i].first;
       const double rc = blocks[i].second;
       const LeafT* leaf = tree.probeConstLeaf(o);
@@ -601,14 +626,8 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
             if (-rc + (cq - c0).norm() + hq <= floor) continue;
             if (data) {
               // The whole 4^3 quarter (voxels outside `bb` only make the
-              // bound weaker); 16 rows of 4 in a tree, not one long chain.
-              float lo = std::numeric_limits<float>::max();
-              for (int x = 0; x < 4; ++x)
-                for (int y = 0; y < 4; ++y) {
-                  const float* r = data + (((qx + x) << 6) | ((qy + y) << 3) | qz);
-                  lo = std::min(lo, std::min(std::min(r[0], r[1]), std::min(r[2], r[3])));
-                }
-              if (-static_cast<double>(lo) <= floor) continue;
+              // bound weaker).
+              if (-static_cast<double>(quarter_min(data, qx, qy, qz)) <= floor) continue;
             }
             const double rq = region(cq);
             if (-rq + hq <= floor) continue;
@@ -633,15 +652,24 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
                   if (depth > floor) {
                     local.depth_mm = depth;
                     local.where = p;
+                    local_block = i;
                     floor = depth;
                   }
                 }
           }
-      if (local.depth_mm >= cap) saturated = true;
+      if (local.depth_mm >= cap) {
+        std::size_t f = first_saturated.load();
+        while (i < f && !first_saturated.compare_exchange_weak(f, i)) {
+        }
+        break;
+      }
     }
     if (local.depth_mm > 0) {
       std::lock_guard<std::mutex> lock(mu);
-      if (local.depth_mm > best.depth_mm) best = local;
+      if (local.depth_mm > best.depth_mm || (local.depth_mm == best.depth_mm && local_block < best_block)) {
+        best = local;
+        best_block = local_block;
+      }
     }
   };
   // Few blocks (the common case: one pose of a small region) are not worth
