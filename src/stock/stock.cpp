@@ -132,23 +132,42 @@ std::size_t estimate_memory_bytes(const Aabb& box, const Aabb& roi, const StockO
 }
 
 double Stock::Impl::grid_volume() const {
+  const auto& tree = grid->tree();
+  // Material tiles: the tree's values above the leaves only.
   double vol = 0;
-  const double hv = h * h * h;
-  for (auto it = grid->tree().cbeginValueAll(); it; ++it) {
-    const float v = *it;
-    if (it.isVoxelValue()) {
-      if (v >= gamma) continue;
-      if (!roi_index.isInside(it.getCoord())) continue;
-      const double f = std::clamp(0.5 - static_cast<double>(v) / h, 0.0, 1.0);
-      vol += f;
-    } else if (v < 0) {
-      CoordBBox tb;
-      it.getBoundingBox(tb);
-      tb.intersect(roi_index);
-      if (!tb.empty()) vol += static_cast<double>(tb.volume());
-    }
+  auto it = tree.cbeginValueAll();
+  it.setMaxDepth(openvdb::FloatTree::ValueAllCIter::LEAF_DEPTH - 1);
+  for (; it; ++it) {
+    if (*it >= 0) continue;
+    CoordBBox tb;
+    it.getBoundingBox(tb);
+    tb.intersect(roi_index);
+    if (!tb.empty()) vol += static_cast<double>(tb.volume());
   }
-  return vol * hv;
+  // Leaves, in parallel; each leaf's sum kept apart and added in the
+  // tree's order, so the figure repeats exactly.
+  std::vector<const LeafT*> leaves;
+  leaves.reserve(tree.leafCount());
+  for (auto l = tree.cbeginLeaf(); l; ++l) leaves.push_back(l.getLeaf());
+  std::vector<double> sums(leaves.size(), 0.0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
+    for (std::size_t i = r.begin(); i != r.end(); ++i) {
+      const LeafT& leaf = *leaves[i];
+      const Coord o = leaf.origin();
+      const bool whole = roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
+      const float* data = leaf.buffer().data();
+      double sum = 0;
+      for (int idx = 0; idx < 512; ++idx) {
+        const float v = data[idx];
+        if (v >= gamma) continue;
+        if (!whole && !roi_index.isInside(o.offsetBy(idx >> 6, (idx >> 3) & 7, idx & 7))) continue;
+        sum += std::clamp(0.5 - static_cast<double>(v) / h, 0.0, 1.0);
+      }
+      sums[i] = sum;
+    }
+  });
+  for (double s : sums) vol += s;
+  return vol * h * h * h;
 }
 
 Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : impl_(std::make_unique<Impl>()) {
@@ -237,16 +256,23 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
     if (interrupted()) return;  // abandoned: the caller throws below
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       LeafT* leaf = leaves[i];
-      for (auto it = leaf->beginValueAll(); it; ++it) {
-        const Coord c = it.getCoord();
-        float v = m.gamma;
-        if (m.grid_index.isInside(c)) {
-          const double s = sd_at(m.h * Vec3(c.x(), c.y(), c.z()));
-          v = static_cast<float>(std::clamp(s, -g, g));
-        }
-        it.setValue(v);
-        it.setValueOn(std::fabs(v) < m.gamma);
-      }
+      const Coord o = leaf->origin();
+      const bool whole = m.grid_index.isInside(CoordBBox::createCube(o, kLeafDim));
+      float* data = leaf->buffer().data();
+      auto& mask = leaf->getValueMask();
+      for (int ix = 0; ix < kLeafDim; ++ix)
+        for (int iy = 0; iy < kLeafDim; ++iy)
+          for (int iz = 0; iz < kLeafDim; ++iz) {
+            const Coord c = o.offsetBy(ix, iy, iz);
+            float v = m.gamma;
+            if (whole || m.grid_index.isInside(c)) {
+              const double s = sd_at(m.h * Vec3(c.x(), c.y(), c.z()));
+              v = static_cast<float>(std::clamp(s, -g, g));
+            }
+            const auto idx = static_cast<openvdb::Index>((ix << 6) | (iy << 3) | iz);
+            data[idx] = v;
+            mask.set(idx, std::fabs(v) < m.gamma);
+          }
     }
   });
   if (interrupted()) throw InterruptedError({}, interrupt_signal().load(), "interrupted while building the stock grid");
