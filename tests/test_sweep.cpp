@@ -82,5 +82,39 @@ TEST(Sweep, BallG18ArcChordsMatchSampledPoses) {
   compare("G18 G0 X1 Y0 Z0\nG2 X-1 Z0 I-1 K0 F1\n", "ball:d=1,l=1", 8000, 2e-5);
 }
 
+// The pieces `sweep::lipschitz` vouches for change by no more than the
+// distance moved, inside as well as outside: the stock update bounds a
+// voxel by a value at another point on that promise.
+void check_lipschitz(const std::string& program, const std::string& tool_spec, bool expect) {
+  const motion::Move m = single_move(program);
+  const sweep::Sweep s = sweep::sweep_move(m, tool::parse_tool_spec(tool_spec), sweep::SweepOptions{1e-6});
+  ASSERT_FALSE(s.prims.empty());
+  std::mt19937_64 rng(7);
+  for (const auto& p : s.prims) {
+    EXPECT_EQ(sweep::lipschitz(p), expect) << program;
+    if (!expect) continue;
+    const Aabb b = sweep::bounds(p).expanded(0.2);
+    std::uniform_real_distribution<double> ux(b.min.x(), b.max.x()), uy(b.min.y(), b.max.y()), uz(b.min.z(), b.max.z());
+    std::normal_distribution<double> step(0, 0.05);
+    int inside = 0;
+    for (int i = 0; i < 4000; ++i) {
+      const Vec3 x(ux(rng), uy(rng), uz(rng)), y = x + Vec3(step(rng), step(rng), step(rng));
+      const double dx = sweep::distance(p, x), dy = sweep::distance(p, y);
+      inside += dx < 0 && dy < 0;
+      ASSERT_LE(std::fabs(dx - dy), (x - y).norm() * (1 + 1e-9) + 1e-12)
+          << program << " at " << x.transpose() << " and " << y.transpose();
+    }
+    EXPECT_GT(inside, 200) << program;
+  }
+}
+
+TEST(Sweep, DistancesMarkedLipschitzAreLipschitzInsideToo) {
+  check_lipschitz("G0 X0 Y0 Z0\nG1 X1 Y0.4 Z-0.3 F1\n", "ball:d=1,l=1", true);    // ball ramp: parallelogram core
+  check_lipschitz("G0 X0 Y0 Z0\nG1 X1 Y0.4 F1\n", "flat:d=1,l=1", true);          // horizontal
+  check_lipschitz("G0 X0 Y0 Z0\nG1 Z-0.5 F1\n", "bull:d=1,r=0.2,l=1", true);       // vertical
+  check_lipschitz("G17 G0 X1 Y0 Z0\nG3 X-1 Y0 I-1 J0 F1\n", "flat:d=0.6,l=1", true);  // G17 arc
+  check_lipschitz("G0 X0 Y0 Z0\nG1 X1 Z-0.3 F1\n", "flat:d=1,l=1", false);        // flat ramp: a 1-D search
+}
+
 }  // namespace
 }  // namespace cutsim::test

@@ -341,6 +341,12 @@ struct LeafKeys {
   }
 };
 
+// A piece's distance at a block's centre as a bound for the block's voxels
+// (less their offset): where the distance is 1-Lipschitz, or outside.
+double bounded_key(double d, const sweep::Primitive& p) {
+  return d > 0 || sweep::lipschitz(p) ? d : -std::numeric_limits<double>::infinity();
+}
+
 // Leaves above this count in a piece's box are culled block by block on
 // the piece's distance instead of listed whole.
 constexpr std::int64_t kListLeaves = 4096;
@@ -478,6 +484,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     std::vector<Aabb> cbox;
     std::vector<double> ckey;
     std::vector<std::pair<double, std::uint32_t>> order, sub;
+    std::vector<double> sub_last;
+    std::vector<Vec3> sub_at;
     if (interrupted()) return;  // the run is abandoned; stop quickly
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (interrupted()) return;
@@ -489,12 +497,16 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       const Aabb lbox{lmin, lmin + Vec3::Constant(h * (kLeafDim - 1))};
       // Nearest pieces first, by their distance at the centre: the running
       // minimum then lets the rest be cut off by that distance less the
-      // voxel's offset from the centre (a bound only outside the piece).
+      // voxel's offset from the centre. That bounds a piece outside it, and
+      // inside too where its distance is 1-Lipschitz there (a ball end's
+      // line): the pieces a voxel is deep in are tried first, and the many
+      // that overlap it less deeply are passed over. Other pieces the
+      // centre is inside of have no bound (key -inf).
       order.clear();
       for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
         const std::uint32_t id = keys.piece(pairs[k]);
         if (sweep::bounds(*prims[id]).expanded(g).overlaps(lbox))
-          order.emplace_back(pair_d[k] > 0 ? pair_d[k] : -std::numeric_limits<double>::infinity(), id);
+          order.emplace_back(bounded_key(pair_d[k], *prims[id]), id);
       }
       if (order.empty()) continue;
       std::sort(order.begin(), order.end());
@@ -528,11 +540,25 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           const double reach = need_max + hd_sub;
           if (b2 > 0 && (reach <= 0 || b2 >= reach * reach)) continue;
           const double dk = sweep::distance(*cand[k], cb);
-          if (dk > 0 && dk - hd_sub >= need_max) continue;
-          sub.emplace_back(dk > 0 ? dk : -std::numeric_limits<double>::infinity(), static_cast<std::uint32_t>(k));
+          const double key = bounded_key(dk, *cand[k]);
+          if (key - hd_sub >= need_max) continue;
+          sub.emplace_back(key, static_cast<std::uint32_t>(k));
         }
         if (sub.empty()) continue;
         std::sort(sub.begin(), sub.end());
+        // Where every piece's distance is 1-Lipschitz, each piece's value at
+        // the voxel it was last evaluated at bounds it here too, less the
+        // distance between the two (far tighter than the quarter centre's),
+        // and the piece nearest at the last voxel is tried first, so the bar
+        // the others must clear is low from the start. (Not with profile
+        // prisms: their first-order distance would make the voxels depend
+        // on the order the pieces are tried in.)
+        constexpr std::size_t none = std::numeric_limits<std::size_t>::max();
+        bool reuse = true;
+        for (const auto& e : sub) reuse = reuse && sweep::lipschitz(*cand[e.second]);
+        sub_last.assign(sub.size(), std::numeric_limits<double>::quiet_NaN());
+        sub_at.resize(sub.size());
+        std::size_t nearest = none;
         for (int ix = bx; ix < bx + 4; ++ix)
           for (int iy = by; iy < by + 4; ++iy)
             for (int iz = bz; iz < bz + 4; ++iz) {
@@ -547,14 +573,29 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               // Only d < -v changes the voxel; a piece farther than that (or
               // than the nearest piece so far) cannot matter.
               double d = std::numeric_limits<double>::infinity();
-              for (const auto& [key, k] : sub) {
+              std::size_t best = none;
+              auto eval = [&](std::size_t j) {
+                const double dj = sweep::distance(*cand[sub[j].second], p);
+                if (reuse) {
+                  sub_last[j] = dj;
+                  sub_at[j] = p;
+                }
+                if (dj < d) {
+                  d = dj;
+                  best = j;
+                }
+              };
+              if (nearest != none) eval(nearest);
+              for (std::size_t j = 0; j < sub.size() && d > -g; ++j) {  // at -g: clamped to air whatever the rest
                 const double thr = std::min(d, need);
-                if (key - off >= thr) break;  // and every piece after it
-                const double b2 = box_distance2(cbox[k], p);
+                if (sub[j].first - off >= thr) break;  // and every piece after it
+                if (j == nearest) continue;
+                const double b2 = box_distance2(cbox[sub[j].second], p);
                 if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
-                d = std::min(d, sweep::distance(*cand[k], p));
-                if (d <= -g) break;  // clamped to air whatever the rest
+                if (!std::isnan(sub_last[j]) && sub_last[j] - (p - sub_at[j]).norm() >= thr) continue;
+                eval(j);
               }
+              if (reuse && best != none) nearest = best;
               ++evaluated;
               if (-d > v) {
                 const float nv = static_cast<float>(std::min(-d, g));

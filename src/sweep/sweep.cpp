@@ -268,6 +268,11 @@ const Aabb& bounds(const Primitive& p) {
   return std::visit([](const auto& q) -> const Aabb& { return q.bounds; }, p);
 }
 
+bool lipschitz(const Primitive& p) {
+  if (const auto* lp = std::get_if<LinearPrim>(&p)) return lp->kind != LinearPrim::Case::general;
+  return !std::holds_alternative<ProfilePrim>(p);
+}
+
 Aabb world_box(const Aabb& local, const Eigen::Matrix3d& R, const Vec3& tip) {
   Aabb b;
   for (int i = 0; i < 8; ++i) {

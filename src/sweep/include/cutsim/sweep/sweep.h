@@ -62,6 +62,15 @@ using Primitive = std::variant<LinearPrim, ArcPrim, ProfilePrim, TorusPrim>;
 
 double distance(const Primitive& p, const Vec3& x);
 const Aabb& bounds(const Primitive& p);
+/// True when the piece's distance is 1-Lipschitz inside as well as outside
+/// (|d(x) - d(y)| <= |x - y| everywhere), so a value at one point bounds it
+/// nearby on both sides of the surface. Holds where it is the distance to
+/// a convex core less a radius, or the exact distance of a capped prism or
+/// a torus: lines that are vertical, horizontal or of a zero-radius core
+/// (ball ends), G17 arcs, fly-cutter tori. Not for the general line (an
+/// approximate minimisation) or a profile prism (a first-order estimate
+/// when sheared).
+bool lipschitz(const Primitive& p);
 
 struct SweepOptions {
   /// Largest distance between an arc and the chords that stand for it where
