@@ -386,17 +386,24 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       const auto id = static_cast<std::uint32_t>(i);
       const std::int64_t nl = std::int64_t((bb.max().x() >> 3) - (bb.min().x() >> 3) + 1) *
                               ((bb.max().y() >> 3) - (bb.min().y() >> 3) + 1) * ((bb.max().z() >> 3) - (bb.min().z() >> 3) + 1);
-      if (nl <= kListLeaves) {
+      // Only the leaves step 2 would not pass over (the same test on the
+      // same value), so they are neither sorted nor visited again: air
+      // tiles, and leaves beyond the piece's reach. A long tool's piece
+      // (a 3 mm flute on a tilted axis) has its box mostly in air or far
+      // from its slanted core.
+      openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(tree);
+      auto leaf = [&](const Coord& o) {
+        if (!acc.probeConstLeaf(o) && acc.getValue(o) > 0) return;  // air tile
+        const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
+        if (sweep::distance(p, c0) <= g + hd0) out.push_back(keys.key(o, id));
+      };
+      if (nl <= kListLeaves && !sweep::lipschitz(p)) {
         for (int x = bb.min().x() & ~7; x <= bb.max().x(); x += kLeafDim)
           for (int y = bb.min().y() & ~7; y <= bb.max().y(); y += kLeafDim)
-            for (int z = bb.min().z() & ~7; z <= bb.max().z(); z += kLeafDim) out.push_back(keys.key(Coord(x, y, z), id));
+            for (int z = bb.min().z() & ~7; z <= bb.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
       } else {
         for_each_leaf_block(
-            m.origin, h, bb, [&](const Vec3& c, double hd) { return sweep::distance(p, c) <= g + hd; },
-            [&](const Coord& o) {
-              const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
-              if (sweep::distance(p, c0) <= g + hd0) out.push_back(keys.key(o, id));
-            });
+            m.origin, h, bb, [&](const Vec3& c, double hd) { return sweep::distance(p, c) <= g + hd; }, leaf);
       }
     }
   });
