@@ -106,7 +106,38 @@ std::string f(double v, int decimals = 6) {
   return s;
 }
 
-TriMesh target_mesh(const std::vector<Outline>& o) {
+// The outline's equal-angle rays meet the wall every 0.1 um where they hit
+// it square on (they must, to be 11 um apart where they graze the trailing
+// edge). The mesh keeps only the points a chord cannot pass over within
+// `tol`: 12,000 wall slivers had made every closest-point query near the
+// wall sort through a hundred of them.
+std::vector<Outline> thin_outline(const std::vector<Outline>& o, double tol) {
+  auto off_chord = [](const Vec3& p, const Vec3& a, const Vec3& b) {
+    const Vec3 ab = b - a;
+    const double t = std::clamp((p - a).dot(ab) / std::max(ab.squaredNorm(), 1e-300), 0.0, 1.0);
+    return (p - (a + t * ab)).norm();
+  };
+  std::vector<Outline> out;
+  const std::size_t n = o.size();
+  std::size_t i = 0;
+  while (i < n) {
+    out.push_back(o[i]);
+    // The farthest j whose chord from i passes every point between within tol.
+    std::size_t j = i + 1;
+    while (j + 1 <= n) {
+      const Vec3& b = o[(j + 1) % n].p;
+      bool ok = true;
+      for (std::size_t k = i + 1; k <= j && ok; ++k) ok = off_chord(o[k].p, o[i].p, b) <= tol;
+      if (!ok) break;
+      ++j;
+    }
+    i = j;
+  }
+  return out;
+}
+
+TriMesh target_mesh(const std::vector<Outline>& full) {
+  const std::vector<Outline> o = thin_outline(full, 1e-5);
   TriMesh m;
   const auto n = static_cast<std::uint32_t>(o.size());
   const Vec3 s = star_centre();
