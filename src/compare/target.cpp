@@ -64,9 +64,13 @@ struct Target::Impl {
   static bool callback(RTCPointQueryFunctionArguments* args) {
     Query& q = *static_cast<Query*>(args->userPtr);
     const auto& t = q.self->mesh.triangles[args->primID];
+    const Vec3 &a = q.self->mesh.positions[t[0]], &b = q.self->mesh.positions[t[1]], &c3 = q.self->mesh.positions[t[2]];
+    // Embree offers every triangle of a tree leaf whose box meets the
+    // sphere: the triangle's own box rejects most of the others cheaply.
+    const Vec3 out = (a.cwiseMin(b).cwiseMin(c3) - q.p).cwiseMax(q.p - a.cwiseMax(b).cwiseMax(c3)).cwiseMax(0.0);
+    if (out.squaredNorm() >= q.best2) return false;
     int f;
-    const Vec3 c = closest_on_triangle(q.p, q.self->mesh.positions[t[0]], q.self->mesh.positions[t[1]],
-                                       q.self->mesh.positions[t[2]], f);
+    const Vec3 c = closest_on_triangle(q.p, a, b, c3, f);
     const double d2 = (c - q.p).squaredNorm();
     if (d2 < q.best2) {
       q.best2 = d2;
