@@ -108,6 +108,46 @@ void check_lipschitz(const std::string& program, const std::string& tool_spec, b
   }
 }
 
+TEST(Sweep, ConvexPiecesGiveTheirDistanceAndATangentPlaneBelowIt) {
+  // The stock update skips a piece at a voxel when the tangent plane from
+  // an earlier voxel already clears the bar: the plane must stay below.
+  std::mt19937_64 rng(11);
+  int checked = 0;
+  for (const char* program : {"G0 X0 Y0 Z0\nG1 X1 Y0.4 Z-0.3 F1\n", "G0 X0 Y0 Z0\nG1 X-0.2 Y0.7 Z0.5 F1\n"}) {
+    const sweep::Sweep s = sweep::sweep_move(single_move(program), tool::parse_tool_spec("ball:d=1,l=1"));
+    ASSERT_EQ(s.prims.size(), 1u);
+    const auto& p = s.prims[0];
+    const Aabb b = sweep::bounds(p).expanded(0.3);
+    std::uniform_real_distribution<double> ux(b.min.x(), b.max.x()), uy(b.min.y(), b.max.y()), uz(b.min.z(), b.max.z());
+    for (int i = 0; i < 3000; ++i) {
+      const Vec3 x(ux(rng), uy(rng), uz(rng)), y(ux(rng), uy(rng), uz(rng));
+      double dx = 0;
+      Vec3 g;
+      ASSERT_TRUE(sweep::convex_distance(p, x, &dx, &g));
+      EXPECT_EQ(dx, sweep::distance(p, x));
+      EXPECT_LE(g.norm(), 1 + 1e-12);
+      EXPECT_GE(sweep::distance(p, y), dx + g.dot(y - x) - 1e-12) << program << " from " << x.transpose() << " to "
+                                                                 << y.transpose();
+      // Off the core the plane touches: the gradient matches the distance's slope.
+      const double e = 1e-7;
+      if (dx > -0.45) {
+        const Vec3 fd((sweep::distance(p, x + Vec3(e, 0, 0)) - sweep::distance(p, x - Vec3(e, 0, 0))) / (2 * e),
+                      (sweep::distance(p, x + Vec3(0, e, 0)) - sweep::distance(p, x - Vec3(0, e, 0))) / (2 * e),
+                      (sweep::distance(p, x + Vec3(0, 0, e)) - sweep::distance(p, x - Vec3(0, 0, e))) / (2 * e));
+        EXPECT_NEAR((fd - g).norm(), 0, 1e-5) << " at " << x.transpose();
+        ++checked;
+      }
+    }
+  }
+  EXPECT_GT(checked, 3000);
+  // Other pieces say no.
+  const sweep::Sweep arc =
+      sweep::sweep_move(single_move("G17 G0 X1 Y0 Z0\nG3 X-1 Y0 I-1 J0 F1\n"), tool::parse_tool_spec("flat:d=0.6,l=1"));
+  double d = 0;
+  Vec3 g;
+  EXPECT_FALSE(sweep::convex_distance(arc.prims.at(0), Vec3(0, 1, 0), &d, &g));
+}
+
 TEST(Sweep, DistancesMarkedLipschitzAreLipschitzInsideToo) {
   check_lipschitz("G0 X0 Y0 Z0\nG1 X1 Y0.4 Z-0.3 F1\n", "ball:d=1,l=1", true);    // ball ramp: parallelogram core
   check_lipschitz("G0 X0 Y0 Z0\nG1 X1 Y0.4 F1\n", "flat:d=1,l=1", true);          // horizontal

@@ -492,7 +492,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     std::vector<double> ckey;
     std::vector<std::pair<double, std::uint32_t>> order, sub;
     std::vector<double> sub_last;
-    std::vector<Vec3> sub_at;
+    std::vector<Vec3> sub_at, sub_grad;
     if (interrupted()) return;  // the run is abandoned; stop quickly
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (interrupted()) return;
@@ -565,6 +565,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         for (const auto& e : sub) reuse = reuse && sweep::lipschitz(*cand[e.second]);
         sub_last.assign(sub.size(), std::numeric_limits<double>::quiet_NaN());
         sub_at.resize(sub.size());
+        sub_grad.resize(sub.size());
         std::size_t nearest = none;
         for (int ix = bx; ix < bx + 4; ++ix)
           for (int iy = by; iy < by + 4; ++iy)
@@ -582,8 +583,14 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               double d = std::numeric_limits<double>::infinity();
               std::size_t best = none;
               auto eval = [&](std::size_t j) {
-                const double dj = sweep::distance(*cand[sub[j].second], p);
-                if (reuse) {
+                double dj;
+                if (!reuse) {
+                  dj = sweep::distance(*cand[sub[j].second], p);
+                } else {
+                  if (!sweep::convex_distance(*cand[sub[j].second], p, &dj, &sub_grad[j])) {
+                    dj = sweep::distance(*cand[sub[j].second], p);
+                    sub_grad[j] = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
+                  }
                   sub_last[j] = dj;
                   sub_at[j] = p;
                 }
@@ -599,7 +606,12 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
                 if (j == nearest) continue;
                 const double b2 = box_distance2(cbox[sub[j].second], p);
                 if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
-                if (!std::isnan(sub_last[j]) && sub_last[j] - (p - sub_at[j]).norm() >= thr) continue;
+                if (!std::isnan(sub_last[j])) {
+                  // Convex pieces: the tangent plane at the last voxel.
+                  const double bound = std::isnan(sub_grad[j].x()) ? sub_last[j] - (p - sub_at[j]).norm()
+                                                                   : sub_last[j] + sub_grad[j].dot(p - sub_at[j]);
+                  if (bound >= thr) continue;
+                }
                 eval(j);
               }
               if (reuse && best != none) nearest = best;

@@ -31,29 +31,44 @@ double prism_sd(double a, double b) {
   return std::sqrt(ao * ao + bo * bo) + std::min(std::max(a, b), 0.0);
 }
 
-// Distance to the parallelogram {s d + t u : s, t in [0,1]}, u = (0,0,L).
-double parallelogram_dist(const Vec3& p, const Vec3& d, double L) {
+// p less its nearest point on the segment ab.
+Vec3 seg_offset(const Vec3& p, const Vec3& a, const Vec3& b) {
+  const Vec3 ab = b - a;
+  const double l2 = ab.squaredNorm();
+  const double t = l2 > 0 ? clamp01((p - a).dot(ab) / l2) : 0.0;
+  return p - a - t * ab;
+}
+
+// p less its nearest point on the parallelogram {s d + t u : s, t in
+// [0,1]}, u = (0,0,L): its norm is the distance, and over the norm the
+// gradient.
+Vec3 parallelogram_offset(const Vec3& p, const Vec3& d, double L) {
   const Vec3 u(0, 0, L);
   const Vec3 n = d.cross(u);
   const double nn = n.norm();
-  if (nn < 1e-15) return seg_dist3(p, Vec3::Zero(), d + u);
+  if (nn < 1e-15) return seg_offset(p, Vec3::Zero(), d + u);
   // In-plane coordinates (s, t) of p's projection.
   const double dd = d.dot(d), du = d.dot(u), uu = u.dot(u);
   const double pd = p.dot(d), pu = p.dot(u);
   const double det = dd * uu - du * du;
   const double s = (pd * uu - pu * du) / det;
   const double t = (pu * dd - pd * du) / det;
-  if (s >= 0 && s <= 1 && t >= 0 && t <= 1) return std::fabs(p.dot(n) / nn);
+  if (s >= 0 && s <= 1 && t >= 0 && t <= 1) return (p.dot(n) / (nn * nn)) * n;
   // Outside: the nearest point of a convex polygon lies on an edge whose
   // line separates the point from it, so only the violated edges count.
   const Vec3 o = Vec3::Zero();
-  double best = std::numeric_limits<double>::infinity();
-  if (t < 0) best = std::min(best, seg_dist3(p, o, d));
-  if (t > 1) best = std::min(best, seg_dist3(p, u, d + u));
-  if (s < 0) best = std::min(best, seg_dist3(p, o, u));
-  if (s > 1) best = std::min(best, seg_dist3(p, d, d + u));
+  Vec3 best = Vec3::Constant(std::numeric_limits<double>::infinity());
+  auto take = [&](const Vec3& v) {
+    if (v.squaredNorm() < best.squaredNorm()) best = v;
+  };
+  if (t < 0) take(seg_offset(p, o, d));
+  if (t > 1) take(seg_offset(p, u, d + u));
+  if (s < 0) take(seg_offset(p, o, u));
+  if (s > 1) take(seg_offset(p, d, d + u));
   return best;
 }
+
+double parallelogram_dist(const Vec3& p, const Vec3& d, double L) { return parallelogram_offset(p, d, L).norm(); }
 
 // Golden-section minimum of a unimodal function on [0,1].
 template <class F>
@@ -266,6 +281,19 @@ double distance(const Primitive& p, const Vec3& x) {
 
 const Aabb& bounds(const Primitive& p) {
   return std::visit([](const auto& q) -> const Aabb& { return q.bounds; }, p);
+}
+
+bool convex_distance(const Primitive& p, const Vec3& x, double* d, Vec3* g) {
+  const auto* lp = std::get_if<LinearPrim>(&p);
+  if (!lp || lp->kind != LinearPrim::Case::parallelogram) return false;
+  // The distance to a convex set (the core) less a radius: convex, and
+  // the unit offset from the nearest point is its gradient (0 on the core,
+  // a subgradient there). The same arithmetic as linear_distance.
+  const Vec3 v = parallelogram_offset(lp->to_local * (x - lp->origin), lp->d_local, lp->env.core_length);
+  const double n = v.norm();
+  *d = n - lp->env.corner_radius;
+  *g = n > 0 ? Vec3(lp->to_local.transpose() * (v / n)) : Vec3::Zero();
+  return true;
 }
 
 bool lipschitz(const Primitive& p) {

@@ -71,6 +71,12 @@ const Aabb& bounds(const Primitive& p);
 /// approximate minimisation) or a profile prism (a first-order estimate
 /// when sheared).
 bool lipschitz(const Primitive& p);
+/// Where the piece's distance is convex in x (a ball end's line: the
+/// distance to a flat convex core less the ball's radius), sets `d` to the
+/// distance at `x` (the same value `distance` gives) and `g` to a
+/// subgradient, so d(y) >= d(x) + g . (y - x) for every y; else returns
+/// false and sets nothing.
+bool convex_distance(const Primitive& p, const Vec3& x, double* d, Vec3* g);
 
 struct SweepOptions {
   /// Largest distance between an arc and the chords that stand for it where
