@@ -16,6 +16,11 @@
 namespace cutsim::compare {
 
 namespace {
+// Centre of a block's voxels (a block cut by the ROI has fewer than 8).
+Vec3 block_centre(const stock::VoxelBlock& b, double h) {
+  return b.first_center + 0.5 * h * Vec3(b.n[0] - 1, b.n[1] - 1, b.n[2] - 1);
+}
+
 double fraction(double d, double h) { return std::clamp(0.5 - d / h, 0.0, 1.0); }
 
 // A region's level set over the blocks where it exists, clamped to +-h and
@@ -108,7 +113,7 @@ TargetBlocks classify_blocks(const stock::Stock& stock, const Target& target, do
   stock.for_each_roi_block(
       [&](const stock::VoxelBlock& b) {
         const std::size_t i = tb.index(b.leaf);
-        const Vec3 c = b.first_center + 0.5 * h * Vec3(b.n[0] - 1, b.n[1] - 1, b.n[2] - 1);
+        const Vec3 c = block_centre(b, h);
         if (const auto d = target.signed_distance_if_within(c, reach)) {
           tb.d[i] = static_cast<float>(*d);
           tb.state[i] = 2;
@@ -271,7 +276,7 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
       if (b.uniform && (b.value < 0) == (dc < 0) && std::fabs(b.value) >= 0.5 * h) return;
       std::fill(std::begin(dt), std::end(dt), static_cast<float>(dc < 0 ? -h : h));
     } else {
-      block_target_distances(b, b.first_center + 0.5 * h * Vec3(b.n[0] - 1, b.n[1] - 1, b.n[2] - 1), dc, target, h, dt);
+      block_target_distances(b, block_centre(b, h), dc, target, h, dt);
     }
     double over = 0, under = 0;
     for (int x = 0; x < b.n[0]; ++x)
