@@ -17,13 +17,6 @@ double seg_dist2(double px, double py, double bx, double by) {
   return hypot2(px - t * bx, py - t * by);
 }
 
-double seg_dist3(const Vec3& p, const Vec3& a, const Vec3& b) {
-  const Vec3 ab = b - a;
-  const double l2 = ab.squaredNorm();
-  const double t = l2 > 0 ? clamp01((p - a).dot(ab) / l2) : 0.0;
-  return (p - a - t * ab).norm();
-}
-
 // Signed distance of an extruded 2D region: `a` the signed in-plane distance,
 // `b` the signed distance along the extrusion axis.
 double prism_sd(double a, double b) {
