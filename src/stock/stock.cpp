@@ -432,7 +432,10 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   std::vector<char> action(ng, skip);
   // Each piece's distance at the leaf's centre: outside the piece (d > 0)
   // it is exact, so d - |p - centre| bounds the piece's distance at p.
+  // A ball end's piece is convex: its gradient there too, so the tangent
+  // plane at the centre bounds it over the leaf (NaN for other pieces).
   std::vector<double> pair_d(pairs.size());
+  std::vector<Vec3> pair_g(pairs.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ng), [&](const auto& r) {
     if (interrupted()) return;
     for (std::size_t gi = r.begin(); gi != r.end(); ++gi) {
@@ -441,7 +444,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
       double d = std::numeric_limits<double>::infinity();
       for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
-        pair_d[k] = sweep::distance(*prims[keys.piece(pairs[k])], c0);
+        const sweep::Primitive& piece = *prims[keys.piece(pairs[k])];
+        if (!sweep::convex_distance(piece, c0, &pair_d[k], &pair_g[k])) {
+          pair_d[k] = sweep::distance(piece, c0);
+          pair_g[k] = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
+        }
         d = std::min(d, pair_d[k]);
       }
       if (d > g + hd0) continue;
@@ -489,7 +496,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
     std::vector<const sweep::Primitive*> cand;
     std::vector<Aabb> cbox;
-    std::vector<double> ckey;
+    std::vector<double> ckey, seed_d;
+    std::vector<Vec3> cgrad, seed_g;
     std::vector<std::pair<double, std::uint32_t>> order, sub;
     std::vector<double> sub_last;
     std::vector<Vec3> sub_at, sub_grad;
@@ -513,18 +521,22 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
         const std::uint32_t id = keys.piece(pairs[k]);
         if (sweep::bounds(*prims[id]).expanded(g).overlaps(lbox))
-          order.emplace_back(bounded_key(pair_d[k], *prims[id]), id);
+          order.emplace_back(bounded_key(pair_d[k], *prims[id]), static_cast<std::uint32_t>(k));
       }
       if (order.empty()) continue;
       std::sort(order.begin(), order.end());
       cand.clear();
       cbox.clear();
       ckey.clear();
-      for (const auto& [key, id] : order) {
-        cand.push_back(prims[id]);
-        cbox.push_back(sweep::bounds(*prims[id]));
+      cgrad.clear();
+      for (const auto& [key, k] : order) {
+        cand.push_back(prims[keys.piece(pairs[k])]);
+        cbox.push_back(sweep::bounds(*cand.back()));
         ckey.push_back(key);
+        cgrad.push_back(pair_g[k]);
       }
+      seed_d.resize(cand.size());
+      seed_g.resize(cand.size());
       const bool partial = !m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
       float* data = leaf->buffer().data();
       auto& mask = leaf->getValueMask();
@@ -540,13 +552,27 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         const double need_max = -static_cast<double>(vmin);  // the largest -v here
         const Vec3 cb = lmin + h * Vec3(bx + 1.5, by + 1.5, bz + 1.5);
         const double oc = (cb - lc).norm();
+        const double hq = 1.5 * h;  // the quarter's half width between voxel centres
         sub.clear();
         for (std::size_t k = 0; k < cand.size(); ++k) {
           if (ckey[k] - oc - hd_sub >= need_max) break;  // and every piece after it
           const double b2 = box_distance2(cbox[k], cb);
           const double reach = need_max + hd_sub;
           if (b2 > 0 && (reach <= 0 || b2 >= reach * reach)) continue;
-          const double dk = sweep::distance(*cand[k], cb);
+          const Vec3& gl = cgrad[k];
+          double dk;
+          if (!std::isnan(gl.x())) {
+            // Convex: the tangent plane at the leaf's centre, at its lowest
+            // over the quarter's voxels, bounds the piece there; and the
+            // plane at the quarter's centre seeds the voxels' bounds.
+            if (ckey[k] + gl.dot(cb - lc) - hq * gl.cwiseAbs().sum() >= need_max) continue;
+            sweep::convex_distance(*cand[k], cb, &dk, &seed_g[k]);
+            if (dk - hq * seed_g[k].cwiseAbs().sum() >= need_max) continue;
+            seed_d[k] = dk;
+          } else {
+            dk = sweep::distance(*cand[k], cb);
+            seed_d[k] = std::numeric_limits<double>::quiet_NaN();
+          }
           const double key = bounded_key(dk, *cand[k]);
           if (key - hd_sub >= need_max) continue;
           sub.emplace_back(key, static_cast<std::uint32_t>(k));
@@ -563,9 +589,13 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         constexpr std::size_t none = std::numeric_limits<std::size_t>::max();
         bool reuse = true;
         for (const auto& e : sub) reuse = reuse && sweep::lipschitz(*cand[e.second]);
-        sub_last.assign(sub.size(), std::numeric_limits<double>::quiet_NaN());
-        sub_at.resize(sub.size());
+        sub_last.resize(sub.size());
+        sub_at.assign(sub.size(), cb);
         sub_grad.resize(sub.size());
+        for (std::size_t j = 0; j < sub.size(); ++j) {
+          sub_last[j] = seed_d[sub[j].second];
+          sub_grad[j] = seed_g[sub[j].second];
+        }
         std::size_t nearest = none;
         for (int ix = bx; ix < bx + 4; ++ix)
           for (int iy = by; iy < by + 4; ++iy)
