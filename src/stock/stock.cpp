@@ -499,8 +499,17 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     std::vector<double> ckey, seed_d;
     std::vector<Vec3> cgrad, seed_g;
     std::vector<std::pair<double, std::uint32_t>> order, sub;
-    std::vector<double> sub_last;
-    std::vector<Vec3> sub_at, sub_grad;
+    // A piece near a quarter, in the order tried, with the bound its last
+    // evaluation gives (positions relative to the quarter's centre).
+    struct Near {
+      double key;  // distance at the quarter's centre (bounded_key)
+      const sweep::Primitive* prim;
+      const Aabb* box;
+      enum Bound : char { none, plane, cone } bound;
+      double c;  // plane: d(y) >= c + grad . y; cone: d(y) >= c - |y - at|
+      Vec3 grad, at;
+    };
+    std::vector<Near> near;
     if (interrupted()) return;  // the run is abandoned; stop quickly
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (interrupted()) return;
@@ -588,13 +597,15 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         // on the order the pieces are tried in.)
         constexpr std::size_t none = std::numeric_limits<std::size_t>::max();
         bool reuse = true;
-        for (const auto& e : sub) reuse = reuse && sweep::lipschitz(*cand[e.second]);
-        sub_last.resize(sub.size());
-        sub_at.assign(sub.size(), cb);
-        sub_grad.resize(sub.size());
-        for (std::size_t j = 0; j < sub.size(); ++j) {
-          sub_last[j] = seed_d[sub[j].second];
-          sub_grad[j] = seed_g[sub[j].second];
+        near.clear();
+        for (const auto& [key, k] : sub) {
+          reuse = reuse && sweep::lipschitz(*cand[k]);
+          Near& n = near.emplace_back(Near{key, cand[k], &cbox[k], Near::none, 0, Vec3::Zero(), Vec3::Zero()});
+          if (!std::isnan(seed_d[k])) {  // a convex piece's plane at the centre
+            n.bound = Near::plane;
+            n.c = seed_d[k];
+            n.grad = seed_g[k];
+          }
         }
         std::size_t nearest = none;
         for (int ix = bx; ix < bx + 4; ++ix)
@@ -605,24 +616,27 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               if (v >= m.gamma) continue;
               if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
               const Vec3 p = lmin + h * Vec3(ix, iy, iz);
+              const Vec3 y = h * Vec3(ix - bx - 1.5, iy - by - 1.5, iz - bz - 1.5);  // p - cb
               const double need = -static_cast<double>(v);
-              const double off = (p - cb).norm();
-              if (sub[0].first - off >= need) continue;
+              const double off = y.norm();
+              if (near[0].key - off >= need) continue;
               // Only d < -v changes the voxel; a piece farther than that (or
               // than the nearest piece so far) cannot matter.
               double d = std::numeric_limits<double>::infinity();
               std::size_t best = none;
               auto eval = [&](std::size_t j) {
+                Near& n = near[j];
                 double dj;
                 if (!reuse) {
-                  dj = sweep::distance(*cand[sub[j].second], p);
+                  dj = sweep::distance(*n.prim, p);
+                } else if (sweep::convex_distance(*n.prim, p, &dj, &n.grad)) {
+                  n.bound = Near::plane;
+                  n.c = dj - n.grad.dot(y);
                 } else {
-                  if (!sweep::convex_distance(*cand[sub[j].second], p, &dj, &sub_grad[j])) {
-                    dj = sweep::distance(*cand[sub[j].second], p);
-                    sub_grad[j] = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
-                  }
-                  sub_last[j] = dj;
-                  sub_at[j] = p;
+                  dj = sweep::distance(*n.prim, p);
+                  n.bound = Near::cone;
+                  n.c = dj;
+                  n.at = y;
                 }
                 if (dj < d) {
                   d = dj;
@@ -630,18 +644,17 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
                 }
               };
               if (nearest != none) eval(nearest);
-              for (std::size_t j = 0; j < sub.size() && d > -g; ++j) {  // at -g: clamped to air whatever the rest
+              for (std::size_t j = 0; j < near.size() && d > -g; ++j) {  // at -g: clamped to air whatever the rest
                 const double thr = std::min(d, need);
-                if (sub[j].first - off >= thr) break;  // and every piece after it
+                const Near& n = near[j];
+                if (n.key - off >= thr) break;  // and every piece after it
                 if (j == nearest) continue;
-                const double b2 = box_distance2(cbox[sub[j].second], p);
+                // Convex pieces: the tangent plane at the last voxel; other
+                // 1-Lipschitz pieces: the last value less the step.
+                if (n.bound == Near::plane && n.c + n.grad.dot(y) >= thr) continue;
+                if (n.bound == Near::cone && n.c - (y - n.at).norm() >= thr) continue;
+                const double b2 = box_distance2(*n.box, p);
                 if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
-                if (!std::isnan(sub_last[j])) {
-                  // Convex pieces: the tangent plane at the last voxel.
-                  const double bound = std::isnan(sub_grad[j].x()) ? sub_last[j] - (p - sub_at[j]).norm()
-                                                                   : sub_last[j] + sub_grad[j].dot(p - sub_at[j]);
-                  if (bound >= thr) continue;
-                }
                 eval(j);
               }
               if (reuse && best != none) nearest = best;

@@ -37,16 +37,17 @@ Vec3 seg_offset(const Vec3& p, const Vec3& a, const Vec3& b) {
 // gradient.
 Vec3 parallelogram_offset(const Vec3& p, const Vec3& d, double L) {
   const Vec3 u(0, 0, L);
-  const Vec3 n = d.cross(u);
-  const double nn = n.norm();
-  if (nn < 1e-15) return seg_offset(p, Vec3::Zero(), d + u);
-  // In-plane coordinates (s, t) of p's projection.
-  const double dd = d.dot(d), du = d.dot(u), uu = u.dot(u);
-  const double pd = p.dot(d), pu = p.dot(u);
-  const double det = dd * uu - du * du;
-  const double s = (pd * uu - pu * du) / det;
-  const double t = (pu * dd - pd * du) / det;
-  if (s >= 0 && s <= 1 && t >= 0 && t <= 1) return (p.dot(n) / (nn * nn)) * n;
+  // u is vertical, so the plane's normal d x u is level: (d.y, -d.x, 0) L.
+  const double r2 = d.x() * d.x() + d.y() * d.y();
+  if (L * L * r2 < 1e-30) return seg_offset(p, Vec3::Zero(), d + u);
+  // In-plane coordinates (s, t) of p's projection: p = s d + t u + (normal).
+  const double ph = p.x() * d.x() + p.y() * d.y();
+  const double s = ph / r2;
+  const double t = (p.z() * r2 - ph * d.z()) / (L * r2);
+  if (s >= 0 && s <= 1 && t >= 0 && t <= 1) {
+    const double k = (p.x() * d.y() - p.y() * d.x()) / r2;
+    return Vec3(k * d.y(), -k * d.x(), 0);
+  }
   // Outside: the nearest point of a convex polygon lies on an edge whose
   // line separates the point from it, so only the violated edges count.
   const Vec3 o = Vec3::Zero();
