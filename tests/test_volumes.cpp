@@ -125,6 +125,34 @@ TEST(Volume, CutOutsideTheRoiCornerOfABigBlockLeavesTheRestAnalytic) {
 // A batch subtracts the union of its sweeps: every voxel value equals the
 // one-move-at-a-time result, also when moves repeat and reverse (the
 // pathological case for the batch's bounds: identical pieces).
+// Blocks a cut empties are marked all air and passed over by later cuts;
+// a cut through them into the material below must still remove it all.
+// Four pocket depths, 1/4 of a block (0.64 mm) apart, so that in one of
+// them the floor's block also holds emptied leaves above the floor.
+TEST(Volume, CutThroughEmptiedBlocksMatchesClosedForm) {
+  const double h = 0.02;
+  const Aabb box{Vec3(-1.5, -1.5, -2.5), Vec3(1.5, 1.5, 0)};
+  stock::StockOptions so;
+  so.voxel_mm = h;
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  for (const double depth : {1.2, 1.36, 1.52, 1.68}) {
+    SCOPED_TRACE("pocket depth " + std::to_string(depth));
+    stock::Stock s(box, box, so);
+    const std::size_t air0 = s.stats().air_blocks;
+    // A flat d=2 plunge: a cylinder r=1 whose inside is many 32-voxel blocks.
+    s.subtract(sweep::sweep_line(Vec3(0, 0, 1), Vec3(0, 0, -depth), I, tool::parse_tool_spec("flat:d=2", "test")));
+    const double pocket = kPi * depth, pocket_area = 2 * kPi + 2 * kPi * depth;
+    EXPECT_NEAR(s.removed_volume_mm3(), pocket, 0.05 * h * pocket_area);
+    EXPECT_GT(s.stats().air_blocks, air0) << "the pocket's blocks were not marked all air";
+    // A flat d=1 plunge inside it to 0.5 mm below its floor: through the
+    // air, then a cylinder r=0.5 more.
+    s.subtract(sweep::sweep_line(Vec3(0.3, 0.2, 1), Vec3(0.3, 0.2, -depth - 0.5), I,
+                                 tool::parse_tool_spec("flat:d=1", "test")));
+    const double more = kPi * 0.25 * 0.5;
+    EXPECT_NEAR(s.removed_volume_mm3(), pocket + more, 0.05 * h * (pocket_area + 2 * kPi * 0.25 + kPi * 0.5));
+  }
+}
+
 TEST(Volume, BatchedSubtractEqualsMoveByMove) {
   const Aabb box{Vec3(-1, -1, -1), Vec3(2, 2, 0)};
   stock::StockOptions so;

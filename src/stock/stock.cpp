@@ -1,6 +1,7 @@
 #include <algorithm>
 #include <cmath>
 #include <atomic>
+#include <bit>
 #include <cstdint>
 #include <mutex>
 #include <sstream>
@@ -83,11 +84,13 @@ float quarter_min(const float* data, int qx, int qy, int qz) {
 }
 
 // Calls leaf(origin) for each leaf-sized block of `bb`, going down through
-// the 128- and 32-voxel cubes that `keep(centre, half_diagonal)` accepts
-// (world centre; the half diagonal reaches the cube's farthest voxel centre).
+// the 128- and 32-voxel cubes that `keep(centre, half_diagonal, origin,
+// dim)` accepts (world centre; the half diagonal reaches the cube's
+// farthest voxel centre; the cube's first voxel and its width).
+constexpr int kMid = 1 << Stock::Impl::kBlockLog2;  // the occupancy map's blocks
+
 template <class Keep, class Leaf>
 void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep keep, Leaf leaf) {
-  constexpr int kMid = 32;
   const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * h, hd2 = std::sqrt(3.0) * 0.5 * (kMid - 1) * h;
   auto centre = [&](int x, int y, int z, int dim) {
     return Vec3(origin + h * (Vec3(x, y, z).array() + 0.5 * (dim - 1)).matrix());
@@ -96,7 +99,7 @@ void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep
   for (int x1 = q0.x(); x1 <= bb.max().x(); x1 += kNode1Dim)
     for (int y1 = q0.y(); y1 <= bb.max().y(); y1 += kNode1Dim)
       for (int z1 = q0.z(); z1 <= bb.max().z(); z1 += kNode1Dim) {
-        if (!keep(centre(x1, y1, z1, kNode1Dim), hd1)) continue;
+        if (!keep(centre(x1, y1, z1, kNode1Dim), hd1, Coord(x1, y1, z1), kNode1Dim)) continue;
         CoordBBox part = CoordBBox::createCube(Coord(x1, y1, z1), kNode1Dim);
         part.intersect(bb);
         if (part.empty()) continue;
@@ -104,7 +107,7 @@ void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep
         for (int x2 = m0.x(); x2 <= part.max().x(); x2 += kMid)
           for (int y2 = m0.y(); y2 <= part.max().y(); y2 += kMid)
             for (int z2 = m0.z(); z2 <= part.max().z(); z2 += kMid) {
-              if (!keep(centre(x2, y2, z2, kMid), hd2)) continue;
+              if (!keep(centre(x2, y2, z2, kMid), hd2, Coord(x2, y2, z2), kMid)) continue;
               CoordBBox mid = CoordBBox::createCube(Coord(x2, y2, z2), kMid);
               mid.intersect(part);
               if (mid.empty()) continue;
@@ -129,6 +132,58 @@ std::size_t estimate_memory_bytes(const Aabb& box, const Aabb& roi, const StockO
   const double leaves = 2.0 * 1.5 * face_area_within(box, region) / leaf_area;
   const double bytes_per_leaf = sizeof(float) * 512 + 64 + 96;
   return static_cast<std::size_t>(leaves * bytes_per_leaf) + (16u << 20);
+}
+
+void Stock::Impl::rebuild_occupancy() {
+  const Coord lo = grid_index.min(), hi = grid_index.max();
+  occ_lo = Coord(lo.x() >> kBlockLog2, lo.y() >> kBlockLog2, lo.z() >> kBlockLog2);
+  occ_nx = (hi.x() >> kBlockLog2) - occ_lo.x() + 1;
+  occ_ny = (hi.y() >> kBlockLog2) - occ_lo.y() + 1;
+  occ_nz = (hi.z() >> kBlockLog2) - occ_lo.z() + 1;
+  occ.assign((static_cast<std::size_t>(occ_nx) * occ_ny * occ_nz + 63) / 64, 0);
+  auto mark = [&](CoordBBox b) {
+    b.intersect(grid_index);
+    if (b.empty()) return;
+    for (int x = b.min().x() >> kBlockLog2; x <= b.max().x() >> kBlockLog2; ++x)
+      for (int y = b.min().y() >> kBlockLog2; y <= b.max().y() >> kBlockLog2; ++y)
+        for (int z = b.min().z() >> kBlockLog2; z <= b.max().z() >> kBlockLog2; ++z) {
+          const std::size_t i =
+              (static_cast<std::size_t>(x - occ_lo.x()) * occ_ny + (y - occ_lo.y())) * occ_nz + (z - occ_lo.z());
+          occ[i >> 6] |= std::uint64_t(1) << (i & 63);
+        }
+  };
+  const auto& tree = grid->tree();
+  for (auto l = tree.cbeginLeaf(); l; ++l) mark(CoordBBox::createCube(l->origin(), kLeafDim));
+  auto it = tree.cbeginValueAll();
+  it.setMaxDepth(openvdb::FloatTree::ValueAllCIter::LEAF_DEPTH - 1);
+  for (; it; ++it) {
+    if (*it > 0) continue;  // air
+    CoordBBox tb;
+    it.getBoundingBox(tb);
+    mark(tb);
+  }
+}
+
+void Stock::Impl::refresh_occupancy(std::vector<Coord> blocks) {
+  std::sort(blocks.begin(), blocks.end());
+  blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
+  openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(grid->tree());
+  constexpr int kDim = 1 << kBlockLog2;
+  for (const Coord& b : blocks) {
+    const int x = (b.x() >> kBlockLog2) - occ_lo.x(), y = (b.y() >> kBlockLog2) - occ_lo.y(),
+              z = (b.z() >> kBlockLog2) - occ_lo.z();
+    if (x < 0 || y < 0 || z < 0 || x >= occ_nx || y >= occ_ny || z >= occ_nz) continue;
+    const std::size_t i = (static_cast<std::size_t>(x) * occ_ny + y) * occ_nz + z;
+    if (!((occ[i >> 6] >> (i & 63)) & 1)) continue;
+    bool material = false;
+    for (int lx = 0; lx < kDim && !material; lx += kLeafDim)
+      for (int ly = 0; ly < kDim && !material; ly += kLeafDim)
+        for (int lz = 0; lz < kDim && !material; lz += kLeafDim) {
+          const Coord o = b.offsetBy(lx, ly, lz);
+          material = acc.probeConstLeaf(o) || acc.getValue(o) <= 0;
+        }
+    if (!material) occ[i >> 6] &= ~(std::uint64_t(1) << (i & 63));
+  }
 }
 
 double Stock::Impl::grid_volume() const {
@@ -277,6 +332,7 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
   });
   if (interrupted()) throw InterruptedError({}, interrupt_signal().load(), "interrupted while building the stock grid");
   m.initial_grid_volume = m.grid_volume();
+  m.rebuild_occupancy();
 }
 
 Stock::~Stock() = default;
@@ -403,7 +459,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             for (int z = bb.min().z() & ~7; z <= bb.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
       } else {
         for_each_leaf_block(
-            m.origin, h, bb, [&](const Vec3& c, double hd) { return sweep::distance(p, c) <= g + hd; }, leaf);
+            m.origin, h, bb,
+            [&](const Vec3& c, double hd, const Coord& bo, int dim) {
+              return (dim != kMid || m.may_hold_material(bo)) && sweep::distance(p, c) <= g + hd;
+            },
+            leaf);
       }
     }
   });
@@ -478,17 +538,25 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   //    become air tiles.
   std::vector<LeafT*> leaves;
   std::vector<std::size_t> leaf_group;
+  std::vector<Coord> aired;  // blocks that may now hold only air
+  auto block_of = [](const Coord& o) { return Coord(o.x() & ~(kMid - 1), o.y() & ~(kMid - 1), o.z() & ~(kMid - 1)); };
   for (std::size_t gi = 0; gi < ng; ++gi) {
     if (action[gi] == skip) continue;
     const Coord o = keys.origin(pairs[group[gi]]);
     if (action[gi] == to_air) {
-      if (tree.probeLeaf(o) || tree.getValue(o) <= 0) tree.addTile(1, o, m.gamma, false);
+      if (tree.probeLeaf(o) || tree.getValue(o) <= 0) {
+        tree.addTile(1, o, m.gamma, false);
+        aired.push_back(block_of(o));
+      }
       continue;
     }
     leaves.push_back(tree.touchLeaf(o));
     leaf_group.push_back(gi);
   }
-  if (leaves.empty()) return;
+  if (leaves.empty()) {
+    m.refresh_occupancy(std::move(aired));
+    return;
+  }
 
   // 4. Voxels, in parallel: new = max(old, -tool), clamped to the band.
   const double hd_sub = std::sqrt(3.0) * 1.5 * h;
@@ -676,7 +744,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     }
   });
   for (std::size_t i = 0; i < leaves.size(); ++i)
-    if (all_air[i]) tree.addTile(1, leaves[i]->origin(), m.gamma, false);
+    if (all_air[i]) {
+      aired.push_back(block_of(leaves[i]->origin()));
+      tree.addTile(1, leaves[i]->origin(), m.gamma, false);
+    }
+  m.refresh_occupancy(std::move(aired));
 }
 
 Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3&)>& region,
@@ -700,7 +772,10 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   const Node1T* node = nullptr;
   Coord node_origin(std::numeric_limits<int>::max());
   bool node_air = false;
-  for_each_leaf_block(m.origin, m.h, bb, [&](const Vec3& c, double hd) { return region(c) <= hd - min_depth_mm; },
+  for_each_leaf_block(m.origin, m.h, bb,
+                      [&](const Vec3& c, double hd, const Coord& bo, int dim) {
+                        return (dim != kMid || m.may_hold_material(bo)) && region(c) <= hd - min_depth_mm;
+                      },
                       [&](const Coord& o) {
                         const Coord n1(o.x() & ~(kNode1Dim - 1), o.y() & ~(kNode1Dim - 1), o.z() & ~(kNode1Dim - 1));
                         if (n1 != node_origin) {
@@ -922,6 +997,11 @@ StockStats Stock::stats() const {
   s.leaf_nodes = impl_->grid->tree().leafCount();
   s.active_voxels = impl_->grid->tree().activeVoxelCount();
   s.memory_bytes = impl_->grid->tree().memUsage();
+  const Impl& m = *impl_;
+  const std::size_t n = static_cast<std::size_t>(m.occ_nx) * m.occ_ny * m.occ_nz;
+  std::size_t held = 0;
+  for (std::uint64_t w : m.occ) held += static_cast<std::size_t>(std::popcount(w));
+  s.air_blocks = n - held;
   return s;
 }
 

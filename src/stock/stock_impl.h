@@ -2,6 +2,7 @@
 // Private: the OpenVDB state behind Stock.
 #include <atomic>
 #include <cstdint>
+#include <vector>
 
 #include <openvdb/openvdb.h>
 
@@ -25,6 +26,28 @@ struct Stock::Impl {
     return origin + h * Vec3(c.x(), c.y(), c.z());
   }
   double grid_volume() const;
+
+  // Which 32^3 blocks of grid_index may hold material (a leaf, or a tile
+  // at or below 0). A clear bit means all air: cuts and contact checks
+  // pass over the block without probing its 64 leaves. Bits are only
+  // cleared where the tree shows air, so the map errs towards material.
+  static constexpr int kBlockLog2 = 5;
+  openvdb::Coord occ_lo;  // first block, in block units
+  int occ_nx = 0, occ_ny = 0, occ_nz = 0;
+  std::vector<std::uint64_t> occ;
+  /// `o`: a 32-aligned voxel index. True outside the map.
+  bool may_hold_material(const openvdb::Coord& o) const {
+    const int x = (o.x() >> kBlockLog2) - occ_lo.x(), y = (o.y() >> kBlockLog2) - occ_lo.y(),
+              z = (o.z() >> kBlockLog2) - occ_lo.z();
+    if (x < 0 || y < 0 || z < 0 || x >= occ_nx || y >= occ_ny || z >= occ_nz) return true;
+    const std::size_t i = (static_cast<std::size_t>(x) * occ_ny + y) * occ_nz + z;
+    return (occ[i >> 6] >> (i & 63)) & 1;
+  }
+  /// From the whole tree (after a build or a load).
+  void rebuild_occupancy();
+  /// Clears the bits of the given blocks (32-aligned voxel indices) that
+  /// now hold only air.
+  void refresh_occupancy(std::vector<openvdb::Coord> blocks);
 };
 
 }  // namespace cutsim::stock

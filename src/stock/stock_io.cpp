@@ -100,6 +100,7 @@ Stock Stock::load_vdb(const std::string& path) {
   const auto& r = m.roi_index;
   m.roi = Aabb{m.origin + m.h * (Vec3(r.min().x(), r.min().y(), r.min().z()).array() - 0.5).matrix(),
                m.origin + m.h * (Vec3(r.max().x(), r.max().y(), r.max().z()).array() + 0.5).matrix()};
+  m.rebuild_occupancy();
   return s;
 }
 
@@ -138,6 +139,7 @@ Stock Stock::from_mesh(const TriMesh& mesh, double voxel_mm) {
                m.origin + m.h * (Vec3(r.max().x(), r.max().y(), r.max().z()).array() + 0.5).matrix()};
   m.box = m.roi;  // the material is all inside the grid
   m.initial_grid_volume = m.grid_volume();
+  m.rebuild_occupancy();
   return s;
 }
 

@@ -46,6 +46,7 @@ struct StockStats {
   std::size_t leaf_nodes = 0;
   std::size_t active_voxels = 0;
   std::size_t memory_bytes = 0;
+  std::size_t air_blocks = 0;  ///< 32^3-voxel blocks known to hold only air (passed over unprobed)
 };
 
 /// Estimated grid memory (bytes) for a box stock over an ROI.
