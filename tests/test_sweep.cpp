@@ -108,6 +108,38 @@ void check_lipschitz(const std::string& program, const std::string& tool_spec, b
   }
 }
 
+// A long flute tilting as it moves, with only its lower part inside the
+// region (the stock): the orientation held over a piece only needs to
+// hold for that part, so far fewer pieces are cut, and inside the region
+// the sweep is still within the tolerance of densely sampled poses.
+TEST(Sweep, PosesCappedToTheRegionKeepTheToleranceInsideIt) {
+  const tool::Shape shape = tool::cutting_shape(tool::parse_tool_spec("ball:d=1,l=6", "test"));
+  auto pose_at = [](double t) {
+    Pose p = Pose::Identity();
+    p.linear() = Eigen::AngleAxisd(0.6 * t, Vec3::UnitY()).toRotationMatrix();
+    p.translation() = Vec3(1.5 * t, 0.2 * t, -0.3);
+    return p;
+  };
+  const double tol = 1e-3;
+  const Aabb region{Vec3(-1.5, -1.5, -1.5), Vec3(3, 1.5, 0.6)};
+  const sweep::Sweep capped = sweep::sweep_poses(pose_at, shape, tol, 4, &region);
+  const sweep::Sweep full = sweep::sweep_poses(pose_at, shape, tol, 4);
+  EXPECT_LT(capped.prims.size() * 3, full.prims.size()) << capped.prims.size() << " vs " << full.prims.size();
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> ux(region.min.x(), region.max.x()), uy(region.min.y(), region.max.y()),
+      uz(region.min.z(), region.max.z());
+  int near = 0;
+  for (int i = 0; i < 4000; ++i) {
+    const Vec3 x(ux(rng), uy(rng), uz(rng));
+    double ref = std::numeric_limits<double>::infinity();
+    for (int k = 0; k <= 3000; ++k) ref = std::min(ref, tool::shape_distance(shape, pose_at(k / 3000.0).inverse() * x));
+    if (ref <= 0 || ref > 0.3) continue;  // outside, near the swept surface
+    ++near;
+    EXPECT_NEAR(capped.distance(x), ref, 1.2 * tol) << "at " << x.transpose();
+  }
+  EXPECT_GT(near, 300);
+}
+
 TEST(Sweep, ConvexPiecesGiveTheirDistanceAndATangentPlaneBelowIt) {
   // The stock update skips a piece at a voxel when the tangent plane from
   // an earlier voxel already clears the bar: the plane must stay below.

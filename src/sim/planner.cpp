@@ -122,7 +122,7 @@ sweep::Sweep Planner::sweep_part(const motion::Move& m, const PlannedMove& p, co
     return sweep::sweep_line(a.translation(), b.translation(), a.linear(), shape);
   }
   return sweep::sweep_poses([&](double u) { return pose_at(m, p, s0 + u * (s1 - s0)); }, shape,
-                            opt_.sweep_tolerance_mm, 4);
+                            opt_.sweep_tolerance_mm, 4, opt_.interest.empty() ? nullptr : &opt_.interest);
 }
 
 sweep::Sweep Planner::sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const {
@@ -163,7 +163,8 @@ sweep::Sweep Planner::sweep(const motion::Move& m, const PlannedMove& p, const t
     }
     if (!b.expanded(reach + step).overlaps(opt_.interest)) return {};
   }
-  return sweep::sweep_poses([&](double s) { return pose_at(m, p, s); }, shape, opt_.sweep_tolerance_mm, pieces);
+  return sweep::sweep_poses([&](double s) { return pose_at(m, p, s); }, shape, opt_.sweep_tolerance_mm, pieces,
+                            opt_.interest.empty() ? nullptr : &opt_.interest);
 }
 
 void Planner::monitor(const motion::Move& m, const PlannedMove& p, machine::AxisMonitor& mon) const {

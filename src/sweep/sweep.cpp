@@ -370,17 +370,44 @@ Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, c
 }
 
 Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Shape& shape, double tolerance_mm,
-                  int min_pieces) {
+                  int min_pieces, const Aabb* region) {
   // Tip to the top of an envelope; to the farthest corner of other shapes.
-  double reach = 0;
+  double reach = 0, radial = -1;
   if (const auto* env = std::get_if<tool::RevolvedEnvelope>(&shape)) {
     reach = env->core_offset + env->core_length + env->corner_radius;
+    radial = env->disk_radius + env->corner_radius;
   } else {
     const Aabb lb = tool::shape_bounds(shape);
     for (int i = 0; i < 8; ++i)
       reach = std::max(reach, Vec3((i & 1) ? lb.max.x() : lb.min.x(), (i & 2) ? lb.max.y() : lb.min.y(),
                                    (i & 4) ? lb.max.z() : lb.min.z()).norm());
   }
+  // An envelope's points beyond a face of `region` cannot cut: only the
+  // length of the tool inside it counts for the error of a held
+  // orientation (a long flute mostly above the stock turns freely).
+  // Its cross-section at axial distance r spans r (a . n) +- radial
+  // sqrt(1 - (a . n)^2) along a face's normal n.
+  const bool capped = region && !region->empty() && radial >= 0;
+  auto axial_inside = [&](const Pose& q) {
+    const Vec3 tip = q.translation(), a = q.linear().col(2);
+    double r = reach;
+    for (int i = 0; i < 3; ++i)
+      for (const double sign : {1.0, -1.0}) {
+        const double an = sign * a[i];
+        if (an <= 1e-9) continue;
+        const double face = sign > 0 ? region->max[i] : -region->min[i];
+        r = std::min(r, (face - sign * tip[i] + radial * std::sqrt(std::max(0.0, 1 - an * an))) / an);
+      }
+    return std::max(r, 0.0);
+  };
+  // The reach that counts over a piece: the farthest tool point inside the
+  // region at its ends and middle, plus the tip's travel between them.
+  auto piece_reach = [&](const Pose& p0, const Pose& p1, const Pose& pm) {
+    if (!capped) return reach;
+    const double r = std::max({axial_inside(p0), axial_inside(p1), axial_inside(pm)}) +
+                     (p1.translation() - p0.translation()).norm();
+    return std::min(reach, std::hypot(r, radial));
+  };
   Sweep s;
   struct Node { double t0, t1; Pose p0, p1; int depth; };
   std::vector<Node> stack;
@@ -396,6 +423,7 @@ Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Shape&
     const double tm = 0.5 * (nd.t0 + nd.t1);
     const Pose pm = pose_at(tm);
     const Vec3 a0 = nd.p0.linear().col(2), a1 = nd.p1.linear().col(2), am = pm.linear().col(2);
+    const double reach = piece_reach(nd.p0, nd.p1, pm);
     const Vec3 tip_mid = 0.5 * (nd.p0.translation() + nd.p1.translation());
     const Vec3 top_mid = 0.5 * (nd.p0.translation() + reach * a0 + nd.p1.translation() + reach * a1);
     const double dev = std::max((pm.translation() - tip_mid).norm(), (pm.translation() + reach * am - top_mid).norm());

@@ -111,8 +111,10 @@ Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, c
 /// orientation at its middle, bisected until the tip and the top of the
 /// envelope stay within `tolerance_mm` of the chords and the orientation
 /// held moves the top by at most `tolerance_mm`. Starts from `min_pieces`.
+/// With `region` (where the sweep can cut: the stock), an envelope's
+/// "top" is its farthest point inside the region.
 Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Shape& shape, double tolerance_mm,
-                  int min_pieces = 4);
+                  int min_pieces = 4, const Aabb* region = nullptr);
 
 /// Fly-cutter revolutions: the swing torus at each pose.
 Sweep sweep_tori(const std::vector<Pose>& poses, const tool::SwingTorus& torus);
