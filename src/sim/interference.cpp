@@ -81,7 +81,7 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
               straight ? sweep::sweep_line(before.translation(), at[i].translation(), at[i].linear(), rg.shape)
                        : sweep::sweep_poses(
                              [&](double u) { return planner_.pose_at(m, pm, s_prev + u * (s - s_prev)) * rg.frame; },
-                             rg.shape, sweep_tol_, 1);
+                             rg.shape, sweep_tol_, 1, &reach);
           b = sweeps[i].bounds;
         }
       }
