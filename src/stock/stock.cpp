@@ -578,6 +578,14 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       Vec3 grad, at;
     };
     std::vector<Near> near;
+    // Runs of kRun pieces in that order, bounded together from their
+    // planes at the quarter's centre: min c + mean grad . y - spread |y|.
+    constexpr std::size_t kRun = 8;
+    struct Run {
+      double c, spread;
+      Vec3 grad;
+    };
+    std::vector<Run> runs;
     if (interrupted()) return;  // the run is abandoned; stop quickly
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (interrupted()) return;
@@ -675,6 +683,27 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             n.grad = seed_g[k];
           }
         }
+        // A run whose pieces are all convex gets one bound for all of them
+        // (its planes at the centre are nearly parallel where many short
+        // pieces of one path pass a voxel); else it is never skipped whole.
+        runs.clear();
+        for (std::size_t j0 = 0; j0 < near.size(); j0 += kRun) {
+          const std::size_t j1 = std::min(j0 + kRun, near.size());
+          Run r{std::numeric_limits<double>::infinity(), 0, Vec3::Zero()};
+          bool convex = true;
+          for (std::size_t j = j0; j < j1; ++j) {
+            convex = convex && near[j].bound == Near::plane;
+            r.c = std::min(r.c, near[j].c);
+            r.grad += near[j].grad;
+          }
+          if (!convex) {
+            runs.push_back({-std::numeric_limits<double>::infinity(), 0, Vec3::Zero()});
+            continue;
+          }
+          r.grad /= static_cast<double>(j1 - j0);
+          for (std::size_t j = j0; j < j1; ++j) r.spread = std::max(r.spread, (near[j].grad - r.grad).norm());
+          runs.push_back(r);
+        }
         std::size_t nearest = none;
         for (int ix = bx; ix < bx + 4; ++ix)
           for (int iy = by; iy < by + 4; ++iy)
@@ -716,6 +745,13 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
                 const double thr = std::min(d, need);
                 const Near& n = near[j];
                 if (n.key - off >= thr) break;  // and every piece after it
+                if (j % kRun == 0) {
+                  const Run& r = runs[j / kRun];
+                  if (r.c + r.grad.dot(y) - r.spread * off >= thr) {
+                    j += kRun - 1;  // the whole run
+                    continue;
+                  }
+                }
                 if (j == nearest) continue;
                 // Convex pieces: the tangent plane at the last voxel; other
                 // 1-Lipschitz pieces: the last value less the step.
