@@ -26,41 +26,59 @@ Kinematics::Kinematics(Machine m) : m_(std::move(m)) {
     const int i = axis_index(j.axis);
     if (j.type != JointType::linear || i > 2 || !j.direction.isApprox(Vec3::Unit(i), 0) || !j.error.zero())
       identity_ = false;
+    axis_.push_back(i);
+    has_error_.push_back(j.error.zero() ? 0 : 1);
+    error_.push_back(j.error.zero() ? Pose::Identity() : j.error.transform());
   }
+  workpiece_inverse_ = m_.workpiece_setting.inverse();
 }
 
+namespace {
+// p * (rotation about the axis through `origin`), without the 4 x 4 product.
+void turn(Pose& p, const Eigen::Matrix3d& R, const Vec3& origin) {
+  p.translation() += p.linear() * (origin - R * origin);
+  p.linear() = p.linear() * R;
+}
+}  // namespace
+
+// The chain walked once per call; a linear joint only moves the frame along
+// its direction, so it costs a matrix-vector product, not a transform product.
 Pose Kinematics::tool_pose(const JointValues& q) const {
-  Pose p = m_.workpiece_setting.inverse();
-  for (const Joint& j : m_.chain) {
-    const double v = q[static_cast<std::size_t>(axis_index(j.axis))];
-    Pose jt = Pose::Identity();
-    if (j.type == JointType::linear) {
-      jt.translation() = v * j.direction;
-    } else {
-      jt.linear() = Eigen::AngleAxisd(v, j.direction).toRotationMatrix();
-      jt.translation() = j.origin - jt.linear() * j.origin;
-    }
-    p = p * jt;
-    if (!j.error.zero()) p = p * j.error.transform();
+  Pose p = workpiece_inverse_;
+  for (std::size_t i = 0; i < m_.chain.size(); ++i) {
+    const Joint& j = m_.chain[i];
+    const double v = q[static_cast<std::size_t>(axis_[i])];
+    if (j.type == JointType::linear) p.translation() += p.linear() * (v * j.direction);
+    else turn(p, Eigen::AngleAxisd(v, j.direction).toRotationMatrix(), j.origin);
+    if (has_error_[i]) p = p * error_[i];
   }
   return p * m_.tool_setting;
 }
 
 JointValues Kinematics::solve_tip(const Vec3& tip, const JointValues& q) const {
-  JointValues base = q;
+  // With the rotary joints held the tip is affine in the linear ones: walk
+  // the chain once with them at 0; a linear joint's column is its direction
+  // in the frame the chain has reached there.
   Eigen::Matrix3d J = Eigen::Matrix3d::Zero();
   int cols[3] = {-1, -1, -1};
   int n = 0;
-  for (const Joint& j : m_.chain)
-    if (j.type == JointType::linear && n < 3) cols[n++] = axis_index(j.axis);
-  if (n == 0) throw GeometryError({}, "machine " + m_.name + " has no linear axis to place the tool tip with");
-  for (int k = 0; k < n; ++k) base[static_cast<std::size_t>(cols[k])] = 0;
-  const Vec3 p0 = tool_pose(base).translation();
-  for (int k = 0; k < n; ++k) {
-    JointValues e = base;
-    e[static_cast<std::size_t>(cols[k])] = 1.0;
-    J.col(k) = tool_pose(e).translation() - p0;
+  Pose p = workpiece_inverse_;
+  for (std::size_t i = 0; i < m_.chain.size(); ++i) {
+    const Joint& j = m_.chain[i];
+    if (j.type == JointType::linear) {
+      if (n < 3) {
+        J.col(n) = p.linear() * j.direction;
+        cols[n++] = axis_[i];
+      } else {
+        p.translation() += p.linear() * (q[static_cast<std::size_t>(axis_[i])] * j.direction);
+      }
+    } else {
+      turn(p, Eigen::AngleAxisd(q[static_cast<std::size_t>(axis_[i])], j.direction).toRotationMatrix(), j.origin);
+    }
+    if (has_error_[i]) p = p * error_[i];
   }
+  if (n == 0) throw GeometryError({}, "machine " + m_.name + " has no linear axis to place the tool tip with");
+  const Vec3 p0 = (p * m_.tool_setting).translation();
   JointValues out = q;
   if (n == 3) {
     Eigen::FullPivLU<Eigen::Matrix3d> lu(J);

@@ -2,6 +2,7 @@
 // Forward kinematics of a machine's shape-generation function and the tool
 // tip solve used by tool centre point control.
 #include <array>
+#include <vector>
 
 #include "cutsim/machine/machine.h"
 #include "cutsim/motion/move.h"
@@ -36,6 +37,12 @@ public:
 private:
   Machine m_;
   bool identity_ = false;
+  // Constant parts of the chain, computed once: W^-1, each joint's axis
+  // index and its error transform (when it has one).
+  Pose workpiece_inverse_ = Pose::Identity();
+  std::vector<int> axis_;
+  std::vector<Pose> error_;
+  std::vector<char> has_error_;
 };
 
 }  // namespace cutsim::machine
