@@ -147,9 +147,8 @@ void Stock::Impl::rebuild_occupancy() {
     for (int x = b.min().x() >> kBlockLog2; x <= b.max().x() >> kBlockLog2; ++x)
       for (int y = b.min().y() >> kBlockLog2; y <= b.max().y() >> kBlockLog2; ++y)
         for (int z = b.min().z() >> kBlockLog2; z <= b.max().z() >> kBlockLog2; ++z) {
-          const std::size_t i =
-              (static_cast<std::size_t>(x - occ_lo.x()) * occ_ny + (y - occ_lo.y())) * occ_nz + (z - occ_lo.z());
-          occ[i >> 6] |= std::uint64_t(1) << (i & 63);
+          const std::int64_t i = occ_bit(Coord(x << kBlockLog2, y << kBlockLog2, z << kBlockLog2));
+          occ[static_cast<std::size_t>(i) >> 6] |= std::uint64_t(1) << (i & 63);
         }
   };
   const auto& tree = grid->tree();
@@ -170,11 +169,8 @@ void Stock::Impl::refresh_occupancy(std::vector<Coord> blocks) {
   openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(grid->tree());
   constexpr int kDim = 1 << kBlockLog2;
   for (const Coord& b : blocks) {
-    const int x = (b.x() >> kBlockLog2) - occ_lo.x(), y = (b.y() >> kBlockLog2) - occ_lo.y(),
-              z = (b.z() >> kBlockLog2) - occ_lo.z();
-    if (x < 0 || y < 0 || z < 0 || x >= occ_nx || y >= occ_ny || z >= occ_nz) continue;
-    const std::size_t i = (static_cast<std::size_t>(x) * occ_ny + y) * occ_nz + z;
-    if (!((occ[i >> 6] >> (i & 63)) & 1)) continue;
+    const std::int64_t i = occ_bit(b);
+    if (i < 0 || !occ_test(i)) continue;
     bool material = false;
     for (int lx = 0; lx < kDim && !material; lx += kLeafDim)
       for (int ly = 0; ly < kDim && !material; ly += kLeafDim)
@@ -182,7 +178,7 @@ void Stock::Impl::refresh_occupancy(std::vector<Coord> blocks) {
           const Coord o = b.offsetBy(lx, ly, lz);
           material = acc.probeConstLeaf(o) || acc.getValue(o) <= 0;
         }
-    if (!material) occ[i >> 6] &= ~(std::uint64_t(1) << (i & 63));
+    if (!material) occ[static_cast<std::size_t>(i) >> 6] &= ~(std::uint64_t(1) << (i & 63));
   }
 }
 

@@ -35,13 +35,18 @@ struct Stock::Impl {
   openvdb::Coord occ_lo;  // first block, in block units
   int occ_nx = 0, occ_ny = 0, occ_nz = 0;
   std::vector<std::uint64_t> occ;
-  /// `o`: a 32-aligned voxel index. True outside the map.
-  bool may_hold_material(const openvdb::Coord& o) const {
+  /// The bit of the block holding voxel `o`, or -1 outside the map.
+  std::int64_t occ_bit(const openvdb::Coord& o) const {
     const int x = (o.x() >> kBlockLog2) - occ_lo.x(), y = (o.y() >> kBlockLog2) - occ_lo.y(),
               z = (o.z() >> kBlockLog2) - occ_lo.z();
-    if (x < 0 || y < 0 || z < 0 || x >= occ_nx || y >= occ_ny || z >= occ_nz) return true;
-    const std::size_t i = (static_cast<std::size_t>(x) * occ_ny + y) * occ_nz + z;
-    return (occ[i >> 6] >> (i & 63)) & 1;
+    if (x < 0 || y < 0 || z < 0 || x >= occ_nx || y >= occ_ny || z >= occ_nz) return -1;
+    return (static_cast<std::int64_t>(x) * occ_ny + y) * occ_nz + z;
+  }
+  bool occ_test(std::int64_t i) const { return (occ[static_cast<std::size_t>(i) >> 6] >> (i & 63)) & 1; }
+  /// `o`: a voxel index (of a 32-aligned block). True outside the map.
+  bool may_hold_material(const openvdb::Coord& o) const {
+    const std::int64_t i = occ_bit(o);
+    return i < 0 || occ_test(i);
   }
   /// From the whole tree (after a build or a load).
   void rebuild_occupancy();
