@@ -423,14 +423,14 @@ Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Shape&
     const double tm = 0.5 * (nd.t0 + nd.t1);
     const Pose pm = pose_at(tm);
     const Vec3 a0 = nd.p0.linear().col(2), a1 = nd.p1.linear().col(2), am = pm.linear().col(2);
-    const double reach = piece_reach(nd.p0, nd.p1, pm);
+    const double top = piece_reach(nd.p0, nd.p1, pm);  // the reach that counts over this piece
     const Vec3 tip_mid = 0.5 * (nd.p0.translation() + nd.p1.translation());
-    const Vec3 top_mid = 0.5 * (nd.p0.translation() + reach * a0 + nd.p1.translation() + reach * a1);
-    const double dev = std::max((pm.translation() - tip_mid).norm(), (pm.translation() + reach * am - top_mid).norm());
+    const Vec3 top_mid = 0.5 * (nd.p0.translation() + top * a0 + nd.p1.translation() + top * a1);
+    const double dev = std::max((pm.translation() - tip_mid).norm(), (pm.translation() + top * am - top_mid).norm());
     // Holding the middle orientation over the piece moves the top by at most
-    // reach * (half the turn).
+    // top * (half the turn).
     const double turn = std::acos(std::clamp(a0.dot(a1), -1.0, 1.0));
-    if ((dev > tolerance_mm || reach * 0.5 * turn > tolerance_mm) && nd.depth < 30) {
+    if ((dev > tolerance_mm || top * 0.5 * turn > tolerance_mm) && nd.depth < 30) {
       stack.push_back({tm, nd.t1, pm, nd.p1, nd.depth + 1});
       stack.push_back({nd.t0, tm, nd.p0, pm, nd.depth + 1});
       continue;
