@@ -153,6 +153,30 @@ TEST(Volume, CutThroughEmptiedBlocksMatchesClosedForm) {
   }
 }
 
+// Every leaf holds a voxel of the band: a leaf of constant values takes a
+// leaf's memory (2 KB) for what a tile holds. Faces are built exactly, the
+// grid ends on whole leaves where the ROI ends inside the material, and a
+// leaf a cut split from a material tile but left whole is a tile again.
+TEST(Volume, EveryLeafHoldsTheBand) {
+  const double h = 0.01;
+  const Aabb box{Vec3(-2.013, -1.987, -3.004), Vec3(2.991, 2.017, 0.003)};
+  const Aabb roi{Vec3(-1.2, -1.1, -0.9), Vec3(2.6, 2.3, 0.5)};  // ends inside the material below and aside
+  stock::StockOptions so;
+  so.voxel_mm = h;
+  stock::Stock s(box, roi, so);
+  EXPECT_GT(s.stats().leaf_nodes, 2000u);
+  EXPECT_EQ(s.stats().idle_leaves, 0u) << "after the build";
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  const tool::Tool ball = tool::parse_tool_spec("ball:d=1", "test");
+  std::vector<sweep::Sweep> moves;
+  moves.push_back(sweep::sweep_line(Vec3(0, 0, 1), Vec3(0, 0, -0.2), I, ball));
+  moves.push_back(sweep::sweep_line(Vec3(0, 0, -0.2), Vec3(1.5, 0.7, -0.35), I, ball));
+  moves.push_back(sweep::sweep_line(Vec3(1.5, 0.7, -0.35), Vec3(0.2, 1.1, -0.3), I, ball));
+  s.subtract(moves);
+  EXPECT_GT(s.removed_volume_mm3(), 0.3);
+  EXPECT_EQ(s.stats().idle_leaves, 0u) << "after the cut";
+}
+
 TEST(Volume, BatchedSubtractEqualsMoveByMove) {
   const Aabb box{Vec3(-1, -1, -1), Vec3(2, 2, 0)};
   stock::StockOptions so;

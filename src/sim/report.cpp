@@ -94,6 +94,8 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   j["active_voxels"] = st.active_voxels;
   j["voxel_evaluations"] = st.voxel_evaluations;
   j["leaf_nodes"] = st.leaf_nodes;
+  j["idle_leaves"] = st.idle_leaves;
+  j["grid_memory_mb"] = static_cast<double>(st.memory_bytes) / 1048576.0;
   nlohmann::ordered_json w = nlohmann::ordered_json::array();
   for (const auto& x : r.warnings) w.push_back({{"line", x.line}, {"column", x.column}, {"message", x.message}});
   j["warnings"] = w;

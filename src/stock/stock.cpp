@@ -252,7 +252,12 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
   m.roi_index = CoordBBox(floor_coord((roi.min - m.origin) / m.h), ceil_coord((roi.max - m.origin) / m.h));
   m.roi = Aabb{m.origin + m.h * (Vec3(m.roi_index.min().x(), m.roi_index.min().y(), m.roi_index.min().z()).array() - 0.5).matrix(),
                m.origin + m.h * (Vec3(m.roi_index.max().x(), m.roi_index.max().y(), m.roi_index.max().z()).array() + 0.5).matrix()};
-  m.grid_index = m.roi_index.expandBy(kLeafDim);
+  // In whole leaves: where the padding ended inside a leaf, the leaf held
+  // material on one side and air on the other, a leaf for every voxel
+  // column of the material the ROI's faces cut.
+  const CoordBBox pad = m.roi_index.expandBy(kLeafDim);
+  m.grid_index = CoordBBox(Coord(pad.min().x() & ~(kLeafDim - 1), pad.min().y() & ~(kLeafDim - 1), pad.min().z() & ~(kLeafDim - 1)),
+                           Coord(pad.max().x() | (kLeafDim - 1), pad.max().y() | (kLeafDim - 1), pad.max().z() | (kLeafDim - 1)));
 
   m.grid = openvdb::FloatGrid::create(m.gamma);
   m.grid->setTransform(openvdb::math::Transform::createLinearTransform(m.h));
@@ -266,7 +271,6 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
   const Coord lo = m.grid_index.min(), hi = m.grid_index.max();
   const Coord lo1(lo.x() & ~(kNode1Dim - 1), lo.y() & ~(kNode1Dim - 1), lo.z() & ~(kNode1Dim - 1));
   const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * m.h;
-  const double hd0 = std::sqrt(3.0) * 0.5 * (kLeafDim - 1) * m.h;
   for (int x1 = lo1.x(); x1 <= hi.x(); x1 += kNode1Dim)
     for (int y1 = lo1.y(); y1 <= hi.y(); y1 += kNode1Dim)
       for (int z1 = lo1.z(); z1 <= hi.z(); z1 += kNode1Dim) {
@@ -290,10 +294,14 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
               CoordBBox lpart = lb;
               lpart.intersect(m.grid_index);
               if (lpart.empty()) continue;
-              const Vec3 c0 = m.h * (Vec3(x, y, z).array() + 0.5 * (kLeafDim - 1)).matrix();
-              const double s0 = sd_at(c0);
-              if (s0 > g + hd0) continue;
-              if (s0 < -(g + hd0) && lpart == lb) {
+              // The box's distance over the leaf's voxel centres, exactly (a
+              // bound from the centre would make a leaf of constant values
+              // for every face twice in three): outside, the gap between the
+              // two boxes; inside, the depth of the nearest face.
+              const Vec3 cmin = m.origin + m.h * Vec3(lpart.min().x(), lpart.min().y(), lpart.min().z());
+              const Vec3 cmax = m.origin + m.h * Vec3(lpart.max().x(), lpart.max().y(), lpart.max().z());
+              if ((box.min - cmax).cwiseMax(cmin - box.max).cwiseMax(0.0).squaredNorm() >= g * g) continue;  // air
+              if ((cmin - box.min).cwiseMin(box.max - cmax).minCoeff() >= g && lpart == lb) {
                 tree.addTile(1, lb.min(), -m.gamma, false);
                 continue;
               }
@@ -556,7 +564,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
 
   // 4. Voxels, in parallel: new = max(old, -tool), clamped to the band.
   const double hd_sub = std::sqrt(3.0) * 1.5 * h;
-  std::vector<char> all_air(leaves.size(), 0);
+  enum : char { kLeaf, kAir, kSolid };
+  std::vector<char> tiled(leaves.size(), kLeaf);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
     std::vector<const sweep::Primitive*> cand;
     std::vector<Aabb> cbox;
@@ -766,20 +775,24 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               }
             }
       }
-      // A leaf with no material left becomes an air tile.
+      // A leaf with no material left becomes an air tile; one the band
+      // split from a material tile but left whole, a material tile again.
       if (!air) {
         air = true;
         for (int idx = 0; idx < 512 && air; ++idx) air = data[idx] >= m.gamma;
       }
-      all_air[i] = air ? 1 : 0;
+      bool solid = !air;
+      for (int idx = 0; idx < 512 && solid; ++idx) solid = data[idx] <= -m.gamma;
+      tiled[i] = air ? kAir : solid ? kSolid : kLeaf;
       m.voxel_evaluations.fetch_add(evaluated, std::memory_order_relaxed);
     }
   });
-  for (std::size_t i = 0; i < leaves.size(); ++i)
-    if (all_air[i]) {
-      aired.push_back(block_of(leaves[i]->origin()));
-      tree.addTile(1, leaves[i]->origin(), m.gamma, false);
-    }
+  for (std::size_t i = 0; i < leaves.size(); ++i) {
+    if (tiled[i] == kLeaf) continue;
+    const Coord o = leaves[i]->origin();
+    if (tiled[i] == kAir) aired.push_back(block_of(o));
+    tree.addTile(1, o, tiled[i] == kAir ? m.gamma : -m.gamma, false);
+  }
   m.refresh_occupancy(std::move(aired));
 }
 
@@ -1029,6 +1042,7 @@ StockStats Stock::stats() const {
   s.leaf_nodes = impl_->grid->tree().leafCount();
   s.active_voxels = impl_->grid->tree().activeVoxelCount();
   s.memory_bytes = impl_->grid->tree().memUsage();
+  for (auto l = impl_->grid->tree().cbeginLeaf(); l; ++l) s.idle_leaves += l->isValueMaskOff() ? 1 : 0;
   const Impl& m = *impl_;
   const std::size_t n = static_cast<std::size_t>(m.occ_nx) * m.occ_ny * m.occ_nz;
   std::size_t held = 0;

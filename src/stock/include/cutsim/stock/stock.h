@@ -47,6 +47,8 @@ struct StockStats {
   std::size_t active_voxels = 0;
   std::size_t memory_bytes = 0;
   std::size_t air_blocks = 0;  ///< 32^3-voxel blocks known to hold only air (passed over unprobed)
+  /// Leaves with no voxel in the band: each could be a tile, 2 KB for nothing.
+  std::size_t idle_leaves = 0;
 };
 
 /// Estimated grid memory (bytes) for a box stock over an ROI.
