@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -24,46 +25,63 @@ Vec3 block_centre(const stock::VoxelBlock& b, double h) {
 double fraction(double d, double h) { return std::clamp(0.5 - d / h, 0.0, 1.0); }
 
 // A region's level set over the blocks where it exists, clamped to +-h and
-// kept in 8 bits (it is only drawn; the volumes are summed before).
+// kept in 8 bits (it is only drawn; the volumes are summed before), on
+// cells of 2^shift voxels: a cell keeps the least of its voxels' values, so
+// any voxel in the region keeps its cell in. A block is coarsened as soon
+// as the regions outgrow the budget for its cell size, so a fine voxel over
+// a large region never holds 512 bytes a block.
 struct RegionBlock {
-  openvdb::Coord origin;  // voxel index from the ROI lattice's origin (>= 0)
-  int n[3];
-  std::int8_t v[512];
+  openvdb::Coord origin;  // first voxel, index from the ROI lattice's origin (>= 0)
+  int n[3];               // voxels
+  int shift = 0;          // cells of 2^shift voxels (a block's cells stay in its 8-voxel lattice cell)
+  std::vector<std::int8_t> v;  // (x * s + y) * s + z, s = 8 >> shift; 127 (= +h) where no voxel
+
+  int side() const { return 8 >> shift; }
+  /// The cell holding voxel `a` (a lattice index) along `k`, from the block's first cell.
+  int cell(int a, int k) const { return (a >> shift) - (origin[k] >> shift); }
+  void coarsen(int to) {
+    if (to <= shift) return;
+    const int s0 = side(), up = to - shift;
+    const int base[3] = {origin.x() >> shift, origin.y() >> shift, origin.z() >> shift};
+    std::vector<std::int8_t> out(static_cast<std::size_t>((8 >> to) * (8 >> to) * (8 >> to)), 127);
+    const int s1 = 8 >> to;
+    for (int x = 0; x < s0; ++x)
+      for (int y = 0; y < s0; ++y)
+        for (int z = 0; z < s0; ++z) {
+          const int cx = ((base[0] + x) >> up) - (origin.x() >> to), cy = ((base[1] + y) >> up) - (origin.y() >> to),
+                    cz = ((base[2] + z) >> up) - (origin.z() >> to);
+          std::int8_t& c = out[static_cast<std::size_t>((cx * s1 + cy) * s1 + cz)];
+          c = std::min(c, v[static_cast<std::size_t>((x * s0 + y) * s0 + z)]);
+        }
+    v.swap(out);
+    shift = to;
+  }
 };
 
 std::int8_t quantize(double v, double h) {
   return static_cast<std::int8_t>(std::floor(std::clamp(v / h, -1.0, 1.0) * 127 + 0.5));
 }
 
-// Meshes the region on cells of k x k x k voxels (k a power of two up to
-// 8, so a block's cells stay in its lattice cell): a cell's value is the
-// least of its voxels', so any voxel in the region keeps its cell in.
-TriMesh mesh_region(const std::vector<RegionBlock>& blocks, const Vec3& lattice_origin, double h, int k) {
+// Meshes the region on its blocks' cells (all of one size, 2^shift voxels).
+TriMesh mesh_region(const std::vector<RegionBlock>& blocks, const Vec3& lattice_origin, double h, int shift) {
   TriMesh out;
   if (blocks.empty()) return out;
   openvdb::initialize();
+  const int k = 1 << shift;
   const double hk = h * k;
   auto grid = openvdb::FloatGrid::create(static_cast<float>(h));
   grid->setTransform(openvdb::math::Transform::createLinearTransform(hk));
   auto acc = grid->getAccessor();
-  const int shift = k == 1 ? 0 : k == 2 ? 1 : k == 4 ? 2 : 3;
   for (const auto& b : blocks) {
-    float cell[512];
-    std::fill(std::begin(cell), std::end(cell), std::numeric_limits<float>::max());
+    const int s = b.side();
     const openvdb::Coord c0(b.origin.x() >> shift, b.origin.y() >> shift, b.origin.z() >> shift);
-    openvdb::Coord c1 = c0;
-    for (int x = 0; x < b.n[0]; ++x)
-      for (int y = 0; y < b.n[1]; ++y)
-        for (int z = 0; z < b.n[2]; ++z) {
-          const openvdb::Coord c((b.origin.x() + x) >> shift, (b.origin.y() + y) >> shift, (b.origin.z() + z) >> shift);
-          c1.maxComponent(c);
-          const int i = ((c.x() - c0.x()) * 8 + (c.y() - c0.y())) * 8 + (c.z() - c0.z());
-          cell[i] = std::min(cell[i], static_cast<float>(b.v[(x * 8 + y) * 8 + z] * (h / 127)));
-        }
+    const openvdb::Coord c1((b.origin.x() + b.n[0] - 1) >> shift, (b.origin.y() + b.n[1] - 1) >> shift,
+                            (b.origin.z() + b.n[2] - 1) >> shift);
     for (int x = c0.x(); x <= c1.x(); ++x)
       for (int y = c0.y(); y <= c1.y(); ++y)
         for (int z = c0.z(); z <= c1.z(); ++z)
-          acc.setValue(openvdb::Coord(x, y, z), cell[((x - c0.x()) * 8 + (y - c0.y())) * 8 + (z - c0.z())]);
+          acc.setValue(openvdb::Coord(x, y, z),
+                       static_cast<float>(b.v[static_cast<std::size_t>(((x - c0.x()) * s + (y - c0.y())) * s + (z - c0.z()))] * (h / 127)));
   }
   std::vector<openvdb::Vec3s> pts;
   std::vector<openvdb::Vec3I> tris;
@@ -264,6 +282,7 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
   struct Sum { Vec3 key; double over = 0, under = 0; };
   std::vector<Sum> sums;
   std::vector<RegionBlock> over_blocks, under_blocks;
+  std::atomic<int> shift{0};  // the region meshes' cells: 2^shift voxels
   std::mutex mu;
   const Vec3 lattice = stock.roi_lattice_origin();
   stock.for_each_roi_block([&](const stock::VoxelBlock& b) {
@@ -290,22 +309,42 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
         }
     if (over == 0 && under == 0) return;  // most blocks: stock and target agree
     RegionBlock ro, ru;
+    const Vec3 idx = (b.first_center - lattice) / h;
+    ro.origin = ru.origin = openvdb::Coord(static_cast<int>(std::lround(idx.x())), static_cast<int>(std::lround(idx.y())),
+                                           static_cast<int>(std::lround(idx.z())));
+    for (int k = 0; k < 3; ++k) ro.n[k] = ru.n[k] = b.n[k];
+    ro.shift = ru.shift = shift.load();
+    const int s = ro.side();
+    ro.v.assign(static_cast<std::size_t>(s * s * s), 127);
+    ru.v.assign(static_cast<std::size_t>(s * s * s), 127);
     for (int x = 0; x < b.n[0]; ++x)
       for (int y = 0; y < b.n[1]; ++y)
         for (int z = 0; z < b.n[2]; ++z) {
           const int i = (x * 8 + y) * 8 + z;
           const double cs = std::clamp<double>(b.uniform ? b.value : b.values[i], -h, h);
-          ro.v[i] = quantize(std::max<double>(dt[i], -cs), h);
-          ru.v[i] = quantize(std::max<double>(cs, -dt[i]), h);
+          const auto c = static_cast<std::size_t>(
+              (ro.cell(ro.origin.x() + x, 0) * s + ro.cell(ro.origin.y() + y, 1)) * s + ro.cell(ro.origin.z() + z, 2));
+          ro.v[c] = std::min(ro.v[c], quantize(std::max<double>(dt[i], -cs), h));
+          ru.v[c] = std::min(ru.v[c], quantize(std::max<double>(cs, -dt[i]), h));
         }
-    const Vec3 idx = (b.first_center - lattice) / h;
-    ro.origin = ru.origin = openvdb::Coord(static_cast<int>(std::lround(idx.x())), static_cast<int>(std::lround(idx.y())),
-                                           static_cast<int>(std::lround(idx.z())));
-    for (int k = 0; k < 3; ++k) ro.n[k] = ru.n[k] = b.n[k];
     std::lock_guard<std::mutex> lock(mu);
     sums.push_back({b.first_center, over, under});
-    if (over > 0) over_blocks.push_back(ro);
-    if (under > 0) under_blocks.push_back(ru);
+    if (over > 0) over_blocks.push_back(std::move(ro));
+    if (under > 0) under_blocks.push_back(std::move(ru));
+    // A region's blocks on a k-voxel grid number about blocks / k^2 (regions
+    // are mostly layers along the surface): k = 2^shift, the finest within
+    // the budget, up to 8. It only grows, so blocks coarsened early are
+    // what the end would make of them.
+    int sh = shift.load();
+    while (sh < 3 && over_blocks.size() + under_blocks.size() > opt.region_block_budget << (2 * sh)) ++sh;
+    if (sh != shift.load()) {
+      shift.store(sh);
+      for (auto* v : {&over_blocks, &under_blocks})
+        for (auto& rb : *v) rb.coarsen(sh);
+    } else {
+      if (over > 0) over_blocks.back().coarsen(sh);
+      if (under > 0) under_blocks.back().coarsen(sh);
+    }
   });
   std::sort(sums.begin(), sums.end(), [](const Sum& a, const Sum& b) {
     return std::lexicographical_compare(a.key.data(), a.key.data() + 3, b.key.data(), b.key.data() + 3);
@@ -313,13 +352,9 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
   auto by_origin = [](const RegionBlock& a, const RegionBlock& b) { return a.origin < b.origin; };
   std::sort(over_blocks.begin(), over_blocks.end(), by_origin);
   std::sort(under_blocks.begin(), under_blocks.end(), by_origin);
-  // A region's blocks on a k-voxel grid number about blocks / k^2 (regions
-  // are mostly layers along the surface).
-  int k = 1;
-  while (k < 8 && (over_blocks.size() + under_blocks.size()) > opt.region_block_budget * static_cast<std::size_t>(k * k)) k *= 2;
-  r.region_mesh_voxel_mm = k * h;
-  r.overcut_mesh = mesh_region(over_blocks, lattice, h, k);
-  r.undercut_mesh = mesh_region(under_blocks, lattice, h, k);
+  r.region_mesh_voxel_mm = (1 << shift.load()) * h;
+  r.overcut_mesh = mesh_region(over_blocks, lattice, h, shift.load());
+  r.undercut_mesh = mesh_region(under_blocks, lattice, h, shift.load());
   const double hv = h * h * h;
   for (const Sum& s : sums) {
     r.overcut_volume_mm3 += s.over * hv;
