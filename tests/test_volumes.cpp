@@ -168,12 +168,19 @@ TEST(Volume, EveryLeafHoldsTheBand) {
   EXPECT_EQ(s.stats().idle_leaves, 0u) << "after the build";
   const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
   const tool::Tool ball = tool::parse_tool_spec("ball:d=1", "test");
+  // Plunges on their own, to depths a voxel apart (every phase of the
+  // leaves): the leaves just below the ball's lowest point are within reach
+  // of its distance at their centres but not of its box.
+  for (int k = 0; k < 8; ++k)
+    s.subtract(sweep::sweep_line(Vec3(-0.6 + 1.1 * (k % 3), -0.5 + 1.1 * (k / 3), 1),
+                                 Vec3(-0.6 + 1.1 * (k % 3), -0.5 + 1.1 * (k / 3), -0.2 - k * h), I, ball));
+  EXPECT_EQ(s.stats().idle_leaves, 0u) << "after the plunges";
   std::vector<sweep::Sweep> moves;
-  moves.push_back(sweep::sweep_line(Vec3(0, 0, 1), Vec3(0, 0, -0.2), I, ball));
+  moves.push_back(sweep::sweep_line(Vec3(-0.6, 0.4, 1), Vec3(0, 0, -0.2), I, ball));
   moves.push_back(sweep::sweep_line(Vec3(0, 0, -0.2), Vec3(1.5, 0.7, -0.35), I, ball));
   moves.push_back(sweep::sweep_line(Vec3(1.5, 0.7, -0.35), Vec3(0.2, 1.1, -0.3), I, ball));
   s.subtract(moves);
-  EXPECT_GT(s.removed_volume_mm3(), 0.3);
+  EXPECT_GT(s.removed_volume_mm3(), 1.0);
   EXPECT_EQ(s.stats().idle_leaves, 0u) << "after the cut";
 }
 

@@ -300,8 +300,11 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
               // two boxes; inside, the depth of the nearest face.
               const Vec3 cmin = m.origin + m.h * Vec3(lpart.min().x(), lpart.min().y(), lpart.min().z());
               const Vec3 cmax = m.origin + m.h * Vec3(lpart.max().x(), lpart.max().y(), lpart.max().z());
-              if ((box.min - cmax).cwiseMax(cmin - box.max).cwiseMax(0.0).squaredNorm() >= g * g) continue;  // air
-              if ((cmin - box.min).cwiseMin(box.max - cmax).minCoeff() >= g && lpart == lb) {
+              // (As the voxels will hold them: in float, against the float band.)
+              const double gap = (box.min - cmax).cwiseMax(cmin - box.max).cwiseMax(0.0).norm();
+              const double depth = (cmin - box.min).cwiseMin(box.max - cmax).minCoeff();
+              if (static_cast<float>(gap) >= m.gamma) continue;  // air
+              if (static_cast<float>(depth) >= m.gamma && lpart == lb) {
                 tree.addTile(1, lb.min(), -m.gamma, false);
                 continue;
               }
@@ -564,8 +567,18 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
 
   // 4. Voxels, in parallel: new = max(old, -tool), clamped to the band.
   const double hd_sub = std::sqrt(3.0) * 1.5 * h;
+  // A leaf with no material left becomes an air tile; one the band split
+  // from a material tile but left whole, a material tile again.
   enum : char { kLeaf, kAir, kSolid };
   std::vector<char> tiled(leaves.size(), kLeaf);
+  auto leaf_state = [gamma = m.gamma](const float* data) {
+    bool air = true, solid = true;
+    for (int idx = 0; idx < 512 && (air || solid); ++idx) {
+      air = air && data[idx] >= gamma;
+      solid = solid && data[idx] <= -gamma;
+    }
+    return air ? kAir : solid ? kSolid : kLeaf;
+  };
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
     std::vector<const sweep::Primitive*> cand;
     std::vector<Aabb> cbox;
@@ -613,7 +626,10 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         if (sweep::bounds(*prims[id]).expanded(g).overlaps(lbox))
           order.emplace_back(bounded_key(pair_d[k], *prims[id]), static_cast<std::uint32_t>(k));
       }
-      if (order.empty()) continue;
+      if (order.empty()) {  // split from a tile for nothing
+        tiled[i] = leaf_state(leaf->buffer().data());
+        continue;
+      }
       std::sort(order.begin(), order.end());
       cand.clear();
       cbox.clear();
@@ -775,15 +791,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               }
             }
       }
-      // A leaf with no material left becomes an air tile; one the band
-      // split from a material tile but left whole, a material tile again.
-      if (!air) {
-        air = true;
-        for (int idx = 0; idx < 512 && air; ++idx) air = data[idx] >= m.gamma;
-      }
-      bool solid = !air;
-      for (int idx = 0; idx < 512 && solid; ++idx) solid = data[idx] <= -m.gamma;
-      tiled[i] = air ? kAir : solid ? kSolid : kLeaf;
+      tiled[i] = air ? kAir : leaf_state(data);
       m.voxel_evaluations.fetch_add(evaluated, std::memory_order_relaxed);
     }
   });
