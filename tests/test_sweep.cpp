@@ -1,6 +1,7 @@
 // Swept-envelope distances against densely sampled tool poses.
 #include <cmath>
 #include <random>
+#include <variant>
 
 #include "cutsim/gcode/block_reader.h"
 #include "cutsim/motion/interpreter.h"
@@ -178,6 +179,91 @@ TEST(Sweep, ConvexPiecesGiveTheirDistanceAndATangentPlaneBelowIt) {
   double d = 0;
   Vec3 g;
   EXPECT_FALSE(sweep::convex_distance(arc.prims.at(0), Vec3(0, 1, 0), &d, &g));
+}
+
+// A ball end turning while it moves becomes hull pieces: the core's hull
+// at the two ends of each piece, grown by the ball. A roll about the
+// motion turns the axis out of the motion's plane (the hull is then a
+// true tetrahedron and its thickness splits it); a turn within that plane
+// (a tool held on a wall's normal) leaves it flat. Both against 3000
+// sampled poses, from both sides. Holding an orientation would take some
+// 1,200 pieces for either (top x half turn <= tolerance, 2,048 after the
+// bisection); the roll takes about as many hulls (its thickness is about
+// the shorter of the step and the top's turn), the plane turn far fewer.
+TEST(Sweep, TurningBallEndHullsKeepTheToleranceInFewPieces) {
+  const tool::Shape shape = tool::cutting_shape(tool::parse_tool_spec("ball:d=1,l=4", "test"));
+  const double tol = 1e-3;
+  struct Case { const char* what; double roll, pitch; std::size_t max_pieces; };
+  for (const Case& c : {Case{"roll about the motion", 0.5, 0.0, 2049}, Case{"turn in the motion's plane", 0.0, 0.6, 64}}) {
+    SCOPED_TRACE(c.what);
+    auto pose_at = [&](double t) {
+      Pose p = Pose::Identity();
+      p.linear() = (Eigen::AngleAxisd(c.roll * t, Vec3::UnitX()) * Eigen::AngleAxisd(c.pitch * t, Vec3::UnitY())).toRotationMatrix();
+      p.translation() = Vec3(1.5 * t, 0, -0.3);
+      return p;
+    };
+    const sweep::Sweep s = sweep::sweep_poses(pose_at, shape, tol, 4);
+    ASSERT_FALSE(s.prims.empty());
+    EXPECT_TRUE(std::holds_alternative<sweep::HullPrim>(s.prims[0]));
+    EXPECT_LT(s.prims.size(), c.max_pieces);
+    RecordProperty(c.pitch > 0 ? "plane_turn_pieces" : "roll_pieces", static_cast<int>(s.prims.size()));
+    std::mt19937_64 rng(5);
+    const Aabb b = s.bounds;
+    std::uniform_real_distribution<double> ux(b.min.x(), b.max.x()), uy(b.min.y(), b.max.y()), uz(b.min.z(), b.max.z());
+    int near = 0;
+    for (int i = 0; i < 3000; ++i) {
+      const Vec3 x(ux(rng), uy(rng), uz(rng));
+      double ref = std::numeric_limits<double>::infinity();
+      for (int k = 0; k <= 3000; ++k) ref = std::min(ref, tool::shape_distance(shape, pose_at(k / 3000.0).inverse() * x));
+      if (ref <= -0.3 || ref > 0.3) continue;  // near the swept surface, on either side
+      ++near;
+      ASSERT_NEAR(s.distance(x), ref, 1.2 * tol) << "at " << x.transpose();
+    }
+    EXPECT_GT(near, 300);
+  }
+}
+
+// The hull piece's distance is exact (against the nearest of a dense cloud
+// of the tetrahedron's points) and convex: its tangent plane stays below.
+TEST(Sweep, HullPieceDistanceIsExactAndConvex) {
+  sweep::HullPrim hp;
+  hp.p[0] = Vec3(0, 0, 0.5);
+  hp.p[1] = Vec3(0.1, 0.2, 2.5);
+  hp.p[2] = Vec3(1.0, 0.3, 0.4);
+  hp.p[3] = Vec3(1.3, -0.4, 2.3);  // a true tetrahedron (volume 0.25)
+  hp.radius = 0.5;
+  for (const Vec3& q : hp.p) hp.bounds.extend(q);
+  hp.bounds = hp.bounds.expanded(hp.radius);
+  const sweep::Primitive p = hp;
+  std::vector<Vec3> cloud;
+  const int n = 40;
+  for (int i = 0; i <= n; ++i)
+    for (int j = 0; i + j <= n; ++j)
+      for (int k = 0; i + j + k <= n; ++k) {
+        const double a = double(i) / n, b = double(j) / n, c = double(k) / n;
+        cloud.push_back(a * hp.p[0] + b * hp.p[1] + c * hp.p[2] + (1 - a - b - c) * hp.p[3]);
+      }
+  std::mt19937_64 rng(3);
+  const Aabb box = hp.bounds.expanded(0.3);
+  std::uniform_real_distribution<double> ux(box.min.x(), box.max.x()), uy(box.min.y(), box.max.y()), uz(box.min.z(), box.max.z());
+  const double spacing = 2.5 / n;  // the cloud's farthest gap from the solid, less than this
+  int inside = 0;
+  for (int i = 0; i < 400; ++i) {
+    const Vec3 x(ux(rng), uy(rng), uz(rng)), y(ux(rng), uy(rng), uz(rng));
+    double near = std::numeric_limits<double>::infinity();
+    for (const Vec3& q : cloud) near = std::min(near, (q - x).squaredNorm());
+    const double d = sweep::distance(p, x);
+    EXPECT_LE(d, std::sqrt(near) - hp.radius + 1e-12) << "at " << x.transpose();
+    EXPECT_GE(d, std::sqrt(near) - hp.radius - spacing) << "at " << x.transpose();
+    double dx = 0;
+    Vec3 g;
+    ASSERT_TRUE(sweep::convex_distance(p, x, &dx, &g));
+    EXPECT_EQ(dx, d);
+    EXPECT_GE(sweep::distance(p, y), dx + g.dot(y - x) - 1e-12) << "from " << x.transpose() << " to " << y.transpose();
+    inside += d == -hp.radius;
+  }
+  EXPECT_GT(inside, 0);  // some fall inside the core
+  EXPECT_TRUE(sweep::lipschitz(p));
 }
 
 TEST(Sweep, DistancesMarkedLipschitzAreLipschitzInsideToo) {

@@ -1,5 +1,6 @@
 #include "cutsim/sweep/sweep.h"
 
+#include <array>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -63,6 +64,53 @@ Vec3 parallelogram_offset(const Vec3& p, const Vec3& d, double L) {
 }
 
 double parallelogram_dist(const Vec3& p, const Vec3& d, double L) { return parallelogram_offset(p, d, L).norm(); }
+
+// p less its nearest point on the triangle abc (by the Voronoi regions of
+// its vertices, edges and face).
+Vec3 triangle_offset(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return ap;
+  const Vec3 bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return bp;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return ap - (d1 / (d1 - d3)) * ab;
+  const Vec3 cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return cp;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return ap - (d2 / (d2 - d6)) * ac;
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) return bp - ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b);
+  const double den = va + vb + vc;
+  if (!(den > 0)) {  // degenerate (collinear): the nearest of its edges
+    Vec3 best = seg_offset(p, a, b);
+    for (const Vec3& v : {seg_offset(p, b, c), seg_offset(p, a, c)})
+      if (v.squaredNorm() < best.squaredNorm()) best = v;
+    return best;
+  }
+  return ap - (vb / den) * ab - (vc / den) * ac;
+}
+
+// p less its nearest point on the tetrahedron (possibly flat) of the four
+// points: zero inside.
+Vec3 hull_offset(const Vec3& p, const Vec3 (&q)[4]) {
+  static constexpr int kFace[4][4] = {{0, 1, 2, 3}, {0, 1, 3, 2}, {0, 2, 3, 1}, {1, 2, 3, 0}};  // face, then the apex
+  bool inside = true;
+  Vec3 best = Vec3::Constant(std::numeric_limits<double>::infinity());
+  for (const auto& f : kFace) {
+    const Vec3 &a = q[f[0]], &b = q[f[1]], &c = q[f[2]];
+    const Vec3 n = (b - a).cross(c - a);
+    const double side = n.dot(p - a), apex = n.dot(q[f[3]] - a);
+    // Outside this face's plane (away from the apex): the nearest point is
+    // on the boundary; a flat hull (apex 0) has no inside.
+    if (apex == 0 || side * apex < 0) inside = false;
+    const Vec3 v = triangle_offset(p, a, b, c);
+    if (v.squaredNorm() < best.squaredNorm()) best = v;
+  }
+  return inside ? Vec3::Zero() : best;
+}
 
 // Golden-section minimum of a unimodal function on [0,1].
 template <class F>
@@ -239,6 +287,30 @@ TorusPrim make_torus(const Pose& pose, const tool::SwingTorus& t) {
   return tp;
 }
 
+// The ball end's core at two poses, hulled and grown by the ball.
+HullPrim make_hull(const Pose& p0, const Pose& p1, const tool::RevolvedEnvelope& env) {
+  HullPrim hp;
+  const Vec3 a0 = p0.linear().col(2), a1 = p1.linear().col(2);
+  hp.p[0] = p0.translation() + env.core_offset * a0;
+  hp.p[1] = hp.p[0] + env.core_length * a0;
+  hp.p[2] = p1.translation() + env.core_offset * a1;
+  hp.p[3] = hp.p[2] + env.core_length * a1;
+  hp.radius = env.corner_radius;
+  Aabb b;
+  for (const Vec3& q : hp.p) b.extend(q);
+  hp.bounds = b.expanded(hp.radius);
+  return hp;
+}
+
+// The least height of the tetrahedron of four points: 0 when they are flat.
+double hull_thickness(const std::array<Vec3, 4>& q) {
+  const double vol6 = std::fabs((q[1] - q[0]).cross(q[2] - q[0]).dot(q[3] - q[0]));
+  double area2 = 0;  // the largest face, twice its area
+  static constexpr int kFace[4][3] = {{0, 1, 2}, {0, 1, 3}, {0, 2, 3}, {1, 2, 3}};
+  for (const auto& f : kFace) area2 = std::max(area2, (q[f[1]] - q[f[0]]).cross(q[f[2]] - q[f[0]]).norm());
+  return area2 > 0 ? vol6 / area2 : 0.0;
+}
+
 // Appends the straight sweep of `shape` from tip0 to tip1 at orientation R.
 void append_line(Sweep& s, const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, const tool::Shape& shape) {
   if (const auto* env = std::get_if<tool::RevolvedEnvelope>(&shape)) {
@@ -269,6 +341,7 @@ double distance(const Primitive& p, const Vec3& x) {
     if constexpr (std::is_same_v<T, LinearPrim>) return linear_distance(q, x);
     else if constexpr (std::is_same_v<T, ArcPrim>) return arc_distance(q, x);
     else if constexpr (std::is_same_v<T, ProfilePrim>) return profile_distance(q, x);
+    else if constexpr (std::is_same_v<T, HullPrim>) return hull_offset(x, q.p).norm() - q.radius;
     else return tool::shape_distance(q.torus, q.to_local * (x - q.origin));
   }, p);
 }
@@ -278,6 +351,13 @@ const Aabb& bounds(const Primitive& p) {
 }
 
 bool convex_distance(const Primitive& p, const Vec3& x, double* d, Vec3* g) {
+  if (const auto* hp = std::get_if<HullPrim>(&p)) {
+    const Vec3 v = hull_offset(x, hp->p);
+    const double n = v.norm();
+    *d = n - hp->radius;
+    *g = n > 0 ? Vec3(v / n) : Vec3::Zero();
+    return true;
+  }
   const auto* lp = std::get_if<LinearPrim>(&p);
   if (!lp || lp->kind != LinearPrim::Case::parallelogram) return false;
   // The distance to a convex set (the core) less a radius: convex, and
@@ -408,6 +488,11 @@ Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Shape&
                      (p1.translation() - p0.translation()).norm();
     return std::min(reach, std::hypot(r, radial));
   };
+  // A ball end (no flat disk) turns as hull pieces: then only the paths'
+  // departure from the chords and the hull's thickness (the turn out of
+  // the motion's plane) count, not the turn itself.
+  const auto* ball = std::get_if<tool::RevolvedEnvelope>(&shape);
+  if (ball && !(ball->disk_radius == 0 && ball->corner_radius > 0)) ball = nullptr;
   Sweep s;
   struct Node { double t0, t1; Pose p0, p1; int depth; };
   std::vector<Node> stack;
@@ -427,15 +512,27 @@ Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Shape&
     const Vec3 tip_mid = 0.5 * (nd.p0.translation() + nd.p1.translation());
     const Vec3 top_mid = 0.5 * (nd.p0.translation() + top * a0 + nd.p1.translation() + top * a1);
     const double dev = std::max((pm.translation() - tip_mid).norm(), (pm.translation() + top * am - top_mid).norm());
-    // Holding the middle orientation over the piece moves the top by at most
-    // top * (half the turn).
-    const double turn = std::acos(std::clamp(a0.dot(a1), -1.0, 1.0));
-    if ((dev > tolerance_mm || top * 0.5 * turn > tolerance_mm) && nd.depth < 30) {
+    bool split = dev > tolerance_mm;
+    if (!split && ball) {
+      // The hull holds the core's bilinear sweep between the two ends and
+      // departs from it by at most its thickness (over the length that counts).
+      const double len = std::clamp(top - ball->core_offset, 0.0, ball->core_length);
+      const Vec3 c0 = nd.p0.translation() + ball->core_offset * a0, c1 = nd.p1.translation() + ball->core_offset * a1;
+      split = hull_thickness({c0, c0 + len * a0, c1, c1 + len * a1}) > tolerance_mm;
+    } else if (!split) {
+      // Holding the middle orientation over the piece moves the top by at
+      // most top * (half the turn).
+      split = top * 0.5 * std::acos(std::clamp(a0.dot(a1), -1.0, 1.0)) > tolerance_mm;
+    }
+    if (split && nd.depth < 30) {
       stack.push_back({tm, nd.t1, pm, nd.p1, nd.depth + 1});
       stack.push_back({nd.t0, tm, nd.p0, pm, nd.depth + 1});
       continue;
     }
-    append_line(s, nd.p0.translation(), nd.p1.translation(), pm.linear(), shape);
+    if (ball)
+      s.prims.emplace_back(make_hull(nd.p0, nd.p1, *ball));
+    else
+      append_line(s, nd.p0.translation(), nd.p1.translation(), pm.linear(), shape);
   }
   for (const Primitive& p : s.prims) s.bounds.extend(bounds(p));
   return s;

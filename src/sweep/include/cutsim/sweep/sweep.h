@@ -58,7 +58,22 @@ struct TorusPrim {
   Aabb bounds;
 };
 
-using Primitive = std::variant<LinearPrim, ArcPrim, ProfilePrim, TorusPrim>;
+/// A ball end turning while it moves: the convex hull of its axial core
+/// (ball centre to the top of the flutes) at the two ends of the piece,
+/// grown by the ball's radius. Where the turn keeps the axis in the plane
+/// of the motion, as a tool held on a wall's normal does, the hull is flat
+/// and the true sweep departs from it only by the curvature of the
+/// points' paths (the sweep's bisection holds that and the hull's
+/// thickness to its tolerance): many fewer pieces than holding an
+/// orientation, whose error grows with the turn itself. Exact distance to
+/// the hull; convex.
+struct HullPrim {
+  Vec3 p[4];        ///< core ends: centre and top at the start, centre and top at the end
+  double radius = 0;
+  Aabb bounds;
+};
+
+using Primitive = std::variant<LinearPrim, ArcPrim, ProfilePrim, TorusPrim, HullPrim>;
 
 double distance(const Primitive& p, const Vec3& x);
 const Aabb& bounds(const Primitive& p);
@@ -107,10 +122,12 @@ Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, c
 Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, const tool::Tool& tool);
 
 /// A move whose tool pose (tip at the origin, axis +Z) is `pose_at(t)`,
-/// t in [0, 1]: pieces of exact straight sweeps, each holding the pose's
-/// orientation at its middle, bisected until the tip and the top of the
-/// envelope stay within `tolerance_mm` of the chords and the orientation
-/// held moves the top by at most `tolerance_mm`. Starts from `min_pieces`.
+/// t in [0, 1], bisected until the tip and the top of the envelope stay
+/// within `tolerance_mm` of the chords. A ball end's pieces are hulls of
+/// its core at their two ends (HullPrim), bisected also until a hull is
+/// no thicker than `tolerance_mm`; other shapes' are exact straight sweeps
+/// holding the orientation at the piece's middle, bisected also until that
+/// moves the top by at most `tolerance_mm`. Starts from `min_pieces`.
 /// With `region` (where the sweep can cut: the stock), an envelope's
 /// "top" is its farthest point inside the region.
 Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Shape& shape, double tolerance_mm,
