@@ -226,14 +226,8 @@ TEST(Sweep, TurningBallEndHullsKeepTheToleranceInFewPieces) {
 // The hull piece's distance is exact (against the nearest of a dense cloud
 // of the tetrahedron's points) and convex: its tangent plane stays below.
 TEST(Sweep, HullPieceDistanceIsExactAndConvex) {
-  sweep::HullPrim hp;
-  hp.p[0] = Vec3(0, 0, 0.5);
-  hp.p[1] = Vec3(0.1, 0.2, 2.5);
-  hp.p[2] = Vec3(1.0, 0.3, 0.4);
-  hp.p[3] = Vec3(1.3, -0.4, 2.3);  // a true tetrahedron (volume 0.25)
-  hp.radius = 0.5;
-  for (const Vec3& q : hp.p) hp.bounds.extend(q);
-  hp.bounds = hp.bounds.expanded(hp.radius);
+  // A true tetrahedron (volume 0.25).
+  const sweep::HullPrim hp = sweep::hull_prim(Vec3(0, 0, 0.5), Vec3(0.1, 0.2, 2.5), Vec3(1.0, 0.3, 0.4), Vec3(1.3, -0.4, 2.3), 0.5);
   const sweep::Primitive p = hp;
   std::vector<Vec3> cloud;
   const int n = 40;

@@ -93,23 +93,27 @@ Vec3 triangle_offset(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c)
   return ap - (vb / den) * ab - (vc / den) * ac;
 }
 
-// p less its nearest point on the tetrahedron (possibly flat) of the four
-// points: zero inside.
-Vec3 hull_offset(const Vec3& p, const Vec3 (&q)[4]) {
-  static constexpr int kFace[4][4] = {{0, 1, 2, 3}, {0, 1, 3, 2}, {0, 2, 3, 1}, {1, 2, 3, 0}};  // face, then the apex
-  bool inside = true;
-  Vec3 best = Vec3::Constant(std::numeric_limits<double>::infinity());
-  for (const auto& f : kFace) {
-    const Vec3 &a = q[f[0]], &b = q[f[1]], &c = q[f[2]];
-    const Vec3 n = (b - a).cross(c - a);
-    const double side = n.dot(p - a), apex = n.dot(q[f[3]] - a);
-    // Outside this face's plane (away from the apex): the nearest point is
-    // on the boundary; a flat hull (apex 0) has no inside.
-    if (apex == 0 || side * apex < 0) inside = false;
-    const Vec3 v = triangle_offset(p, a, b, c);
-    if (v.squaredNorm() < best.squaredNorm()) best = v;
+// The face opposite point k of a hull: its three other points.
+constexpr int kHullFace[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+
+// p less its nearest point on the hull (a tetrahedron, possibly flat):
+// zero inside. The nearest point of a convex solid lies on a face whose
+// plane has the point outside: only those are measured (a flat hull's
+// faces always); none measured means inside.
+Vec3 hull_offset(const Vec3& p, const HullPrim& h) {
+  Vec3 best = Vec3::Zero();
+  double best2 = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 4; ++k) {
+    const Vec3& n = h.normal[k];
+    if (n.dot(p) - h.offset[k] < 0 || (n.dot(p) - h.offset[k] == 0 && n != Vec3::Zero())) continue;
+    const auto& f = kHullFace[k];
+    const Vec3 v = triangle_offset(p, h.p[f[0]], h.p[f[1]], h.p[f[2]]);
+    if (v.squaredNorm() < best2) {
+      best = v;
+      best2 = v.squaredNorm();
+    }
   }
-  return inside ? Vec3::Zero() : best;
+  return best;
 }
 
 // Golden-section minimum of a unimodal function on [0,1].
@@ -289,17 +293,9 @@ TorusPrim make_torus(const Pose& pose, const tool::SwingTorus& t) {
 
 // The ball end's core at two poses, hulled and grown by the ball.
 HullPrim make_hull(const Pose& p0, const Pose& p1, const tool::RevolvedEnvelope& env) {
-  HullPrim hp;
   const Vec3 a0 = p0.linear().col(2), a1 = p1.linear().col(2);
-  hp.p[0] = p0.translation() + env.core_offset * a0;
-  hp.p[1] = hp.p[0] + env.core_length * a0;
-  hp.p[2] = p1.translation() + env.core_offset * a1;
-  hp.p[3] = hp.p[2] + env.core_length * a1;
-  hp.radius = env.corner_radius;
-  Aabb b;
-  for (const Vec3& q : hp.p) b.extend(q);
-  hp.bounds = b.expanded(hp.radius);
-  return hp;
+  const Vec3 c0 = p0.translation() + env.core_offset * a0, c1 = p1.translation() + env.core_offset * a1;
+  return hull_prim(c0, c0 + env.core_length * a0, c1, c1 + env.core_length * a1, env.corner_radius);
 }
 
 // The least height of the tetrahedron of four points: 0 when they are flat.
@@ -335,13 +331,36 @@ void append_line(Sweep& s, const Vec3& tip0, const Vec3& tip1, const Eigen::Matr
 
 }  // namespace
 
+HullPrim hull_prim(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec3& p3, double radius) {
+  HullPrim hp;
+  hp.p[0] = p0;
+  hp.p[1] = p1;
+  hp.p[2] = p2;
+  hp.p[3] = p3;
+  hp.radius = radius;
+  for (int k = 0; k < 4; ++k) {
+    const auto& f = kHullFace[k];
+    const Vec3 &a = hp.p[f[0]], &b = hp.p[f[1]], &c = hp.p[f[2]];
+    Vec3 n = (b - a).cross(c - a);
+    const double apex = n.dot(hp.p[k] - a);
+    if (apex > 0) n = -n;
+    if (apex == 0) n = Vec3::Zero();
+    hp.normal[k] = n;
+    hp.offset[k] = n.dot(a);
+  }
+  Aabb b;
+  for (const Vec3& q : hp.p) b.extend(q);
+  hp.bounds = b.expanded(radius);
+  return hp;
+}
+
 double distance(const Primitive& p, const Vec3& x) {
   return std::visit([&](const auto& q) -> double {
     using T = std::decay_t<decltype(q)>;
     if constexpr (std::is_same_v<T, LinearPrim>) return linear_distance(q, x);
     else if constexpr (std::is_same_v<T, ArcPrim>) return arc_distance(q, x);
     else if constexpr (std::is_same_v<T, ProfilePrim>) return profile_distance(q, x);
-    else if constexpr (std::is_same_v<T, HullPrim>) return hull_offset(x, q.p).norm() - q.radius;
+    else if constexpr (std::is_same_v<T, HullPrim>) return hull_offset(x, q).norm() - q.radius;
     else return tool::shape_distance(q.torus, q.to_local * (x - q.origin));
   }, p);
 }
@@ -352,7 +371,7 @@ const Aabb& bounds(const Primitive& p) {
 
 bool convex_distance(const Primitive& p, const Vec3& x, double* d, Vec3* g) {
   if (const auto* hp = std::get_if<HullPrim>(&p)) {
-    const Vec3 v = hull_offset(x, hp->p);
+    const Vec3 v = hull_offset(x, *hp);
     const double n = v.norm();
     *d = n - hp->radius;
     *g = n > 0 ? Vec3(v / n) : Vec3::Zero();

@@ -71,7 +71,15 @@ struct HullPrim {
   Vec3 p[4];        ///< core ends: centre and top at the start, centre and top at the end
   double radius = 0;
   Aabb bounds;
+  /// Per face (the three points other than p[3 - f]): its normal pointing
+  /// away from the fourth point (zero length for a flat hull's face set:
+  /// then it is always measured) and its offset n . (a point of it).
+  Vec3 normal[4];
+  double offset[4] = {0, 0, 0, 0};
 };
+
+/// The hull piece of four core points grown by `radius` (normals and bounds set).
+HullPrim hull_prim(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec3& p3, double radius);
 
 using Primitive = std::variant<LinearPrim, ArcPrim, ProfilePrim, TorusPrim, HullPrim>;
 
