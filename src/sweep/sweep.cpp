@@ -344,7 +344,11 @@ HullPrim hull_prim(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec3& p
     Vec3 n = (b - a).cross(c - a);
     const double apex = n.dot(hp.p[k] - a);
     if (apex > 0) n = -n;
-    if (apex == 0) n = Vec3::Zero();
+    // The fourth point within 1e-9 mm of the face's plane: the side is
+    // rounding noise (a piece that does not turn), so the face counts as
+    // flat and is always measured. A wrong side would call points beside
+    // the piece inside it.
+    if (!(std::fabs(apex) > 1e-9 * n.norm())) n = Vec3::Zero();
     hp.normal[k] = n;
     hp.offset[k] = n.dot(a);
   }
