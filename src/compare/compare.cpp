@@ -43,11 +43,16 @@ struct RegionBlock {
     if (to <= shift) return;
     const int s0 = side(), up = to - shift;
     const int base[3] = {origin.x() >> shift, origin.y() >> shift, origin.z() >> shift};
+    // Only the cells that hold voxels: past them (a block the ROI cut,
+    // starting inside its lattice cell) the array's slots would map beyond
+    // the lattice cell.
+    int used[3];
+    for (int k = 0; k < 3; ++k) used[k] = cell(origin[k] + n[k] - 1, k) + 1;
     std::vector<std::int8_t> out(static_cast<std::size_t>((8 >> to) * (8 >> to) * (8 >> to)), 127);
     const int s1 = 8 >> to;
-    for (int x = 0; x < s0; ++x)
-      for (int y = 0; y < s0; ++y)
-        for (int z = 0; z < s0; ++z) {
+    for (int x = 0; x < used[0]; ++x)
+      for (int y = 0; y < used[1]; ++y)
+        for (int z = 0; z < used[2]; ++z) {
           const int cx = ((base[0] + x) >> up) - (origin.x() >> to), cy = ((base[1] + y) >> up) - (origin.y() >> to),
                     cz = ((base[2] + z) >> up) - (origin.z() >> to);
           std::int8_t& c = out[static_cast<std::size_t>((cx * s1 + cy) * s1 + cz)];
