@@ -105,7 +105,8 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h) {
   double best2 = std::numeric_limits<double>::infinity();
   for (int k = 0; k < 4; ++k) {
     const Vec3& n = h.normal[k];
-    if (n.dot(p) - h.offset[k] < 0 || (n.dot(p) - h.offset[k] == 0 && n != Vec3::Zero())) continue;
+    const double side = n.dot(p) - h.offset[k];  // > 0 outside; 0 for a flat face
+    if (side < 0 || (side == 0 && n != Vec3::Zero())) continue;
     const auto& f = kHullFace[k];
     const Vec3 v = triangle_offset(p, h.p[f[0]], h.p[f[1]], h.p[f[2]]);
     if (v.squaredNorm() < best2) {
