@@ -1,7 +1,10 @@
 // Swept-envelope distances against densely sampled tool poses.
 #include <cmath>
 #include <random>
+#include <string>
+#include <utility>
 #include <variant>
+#include <vector>
 
 #include "cutsim/gcode/block_reader.h"
 #include "cutsim/motion/interpreter.h"
@@ -57,6 +60,10 @@ void compare(const std::string& program, const std::string& tool_spec, int n_sam
 
 TEST(Sweep, BallLineMatchesSampledPoses) {
   compare("G0 X0 Y0 Z0\nG1 X1 Y0.5 Z-0.3 F1\n", "ball:d=1,l=1.5", 4000, 2e-5);
+  // Level and plunging lines: the same parallelogram (or segment) core.
+  compare("G0 X0 Y0 Z0\nG1 X1 Y0.5 F1\n", "ball:d=1,l=1.5", 4000, 2e-5);
+  compare("G0 X0 Y0 Z0\nG1 Z-0.6 F1\n", "ball:d=1,l=1.5", 4000, 2e-5);
+  compare("G0 X0 Y0 Z0\nG1 Z0.4 F1\n", "ball:d=1,l=1.5", 4000, 2e-5);
 }
 
 TEST(Sweep, FlatHorizontalLineMatchesSampledPoses) {
@@ -146,8 +153,14 @@ TEST(Sweep, ConvexPiecesGiveTheirDistanceAndATangentPlaneBelowIt) {
   // an earlier voxel already clears the bar: the plane must stay below.
   std::mt19937_64 rng(11);
   int checked = 0;
-  for (const char* program : {"G0 X0 Y0 Z0\nG1 X1 Y0.4 Z-0.3 F1\n", "G0 X0 Y0 Z0\nG1 X-0.2 Y0.7 Z0.5 F1\n"}) {
-    const sweep::Sweep s = sweep::sweep_move(single_move(program), tool::parse_tool_spec("ball:d=1,l=1"));
+  std::vector<std::pair<std::string, sweep::Sweep>> sweeps;
+  for (const char* program : {"G0 X0 Y0 Z0\nG1 X1 Y0.4 Z-0.3 F1\n", "G0 X0 Y0 Z0\nG1 X-0.2 Y0.7 Z0.5 F1\n",
+                              "G0 X0 Y0 Z0\nG1 X0.6 Y-0.5 F1\n", "G0 X0 Y0 Z0\nG1 Z-0.7 F1\n", "G0 X0 Y0 Z0\nG1 Z0.3 F1\n"})
+    sweeps.emplace_back(program, sweep::sweep_move(single_move(program), tool::parse_tool_spec("ball:d=1,l=1")));
+  // A tilted axis (the piece's frame rotated): the same, through the rotation.
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.4, Vec3(0.3, 1, 0.2).normalized()).toRotationMatrix();
+  sweeps.emplace_back("tilted", sweep::sweep_line(Vec3(0, 0, 0), Vec3(0.8, -0.3, 0.2), R, tool::parse_tool_spec("ball:d=1,l=1")));
+  for (const auto& [program, s] : sweeps) {
     ASSERT_EQ(s.prims.size(), 1u);
     const auto& p = s.prims[0];
     const Aabb b = sweep::bounds(p).expanded(0.3);
@@ -167,12 +180,12 @@ TEST(Sweep, ConvexPiecesGiveTheirDistanceAndATangentPlaneBelowIt) {
         const Vec3 fd((sweep::distance(p, x + Vec3(e, 0, 0)) - sweep::distance(p, x - Vec3(e, 0, 0))) / (2 * e),
                       (sweep::distance(p, x + Vec3(0, e, 0)) - sweep::distance(p, x - Vec3(0, e, 0))) / (2 * e),
                       (sweep::distance(p, x + Vec3(0, 0, e)) - sweep::distance(p, x - Vec3(0, 0, e))) / (2 * e));
-        EXPECT_NEAR((fd - g).norm(), 0, 1e-5) << " at " << x.transpose();
+        EXPECT_NEAR((fd - g).norm(), 0, 1e-5) << program << " at " << x.transpose();
         ++checked;
       }
     }
   }
-  EXPECT_GT(checked, 3000);
+  EXPECT_GT(checked, 6000);
   // Other pieces say no.
   const sweep::Sweep arc =
       sweep::sweep_move(single_move("G17 G0 X1 Y0 Z0\nG3 X-1 Y0 I-1 J0 F1\n"), tool::parse_tool_spec("flat:d=0.6,l=1"));

@@ -9,7 +9,14 @@ namespace cutsim::sweep {
 
 namespace {
 
-double clamp01(double t) { return t < 0 ? 0 : (t > 1 ? 1 : t); }
+using detail::clamp01;
+
+// p less its nearest point on the segment ab (detail::seg_offset on Vec3s).
+Vec3 seg_offset(const Vec3& p, const Vec3& a, const Vec3& b) {
+  const detail::Off v =
+      detail::seg_offset({p.x(), p.y(), p.z()}, {a.x(), a.y(), a.z()}, {b.x(), b.y(), b.z()});
+  return Vec3(v.x, v.y, v.z);
+}
 
 // Distance from p to segment [a, b] in 2D.
 double seg_dist2(double px, double py, double bx, double by) {
@@ -24,46 +31,6 @@ double prism_sd(double a, double b) {
   const double ao = std::max(a, 0.0), bo = std::max(b, 0.0);
   return std::sqrt(ao * ao + bo * bo) + std::min(std::max(a, b), 0.0);
 }
-
-// p less its nearest point on the segment ab.
-Vec3 seg_offset(const Vec3& p, const Vec3& a, const Vec3& b) {
-  const Vec3 ab = b - a;
-  const double l2 = ab.squaredNorm();
-  const double t = l2 > 0 ? clamp01((p - a).dot(ab) / l2) : 0.0;
-  return p - a - t * ab;
-}
-
-// p less its nearest point on the parallelogram {s d + t u : s, t in
-// [0,1]}, u = (0,0,L): its norm is the distance, and over the norm the
-// gradient.
-Vec3 parallelogram_offset(const Vec3& p, const Vec3& d, double L) {
-  const Vec3 u(0, 0, L);
-  // u is vertical, so the plane's normal d x u is level: (d.y, -d.x, 0) L.
-  const double r2 = d.x() * d.x() + d.y() * d.y();
-  if (L * L * r2 < 1e-30) return seg_offset(p, Vec3::Zero(), d + u);
-  // In-plane coordinates (s, t) of p's projection: p = s d + t u + (normal).
-  const double ph = p.x() * d.x() + p.y() * d.y();
-  const double s = ph / r2;
-  const double t = (p.z() * r2 - ph * d.z()) / (L * r2);
-  if (s >= 0 && s <= 1 && t >= 0 && t <= 1) {
-    const double k = (p.x() * d.y() - p.y() * d.x()) / r2;
-    return Vec3(k * d.y(), -k * d.x(), 0);
-  }
-  // Outside: the nearest point of a convex polygon lies on an edge whose
-  // line separates the point from it, so only the violated edges count.
-  const Vec3 o = Vec3::Zero();
-  Vec3 best = Vec3::Constant(std::numeric_limits<double>::infinity());
-  auto take = [&](const Vec3& v) {
-    if (v.squaredNorm() < best.squaredNorm()) best = v;
-  };
-  if (t < 0) take(seg_offset(p, o, d));
-  if (t > 1) take(seg_offset(p, u, d + u));
-  if (s < 0) take(seg_offset(p, o, u));
-  if (s > 1) take(seg_offset(p, d, d + u));
-  return best;
-}
-
-double parallelogram_dist(const Vec3& p, const Vec3& d, double L) { return parallelogram_offset(p, d, L).norm(); }
 
 // p less its nearest point on the triangle abc (by the Voronoi regions of
 // its vertices, edges and face).
@@ -96,27 +63,6 @@ Vec3 triangle_offset(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c)
 // The face opposite point k of a hull: its three other points.
 constexpr int kHullFace[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
 
-// p less its nearest point on the hull (a tetrahedron, possibly flat):
-// zero inside. The nearest point of a convex solid lies on a face whose
-// plane has the point outside: only those are measured (a flat hull's
-// faces always); none measured means inside.
-Vec3 hull_offset(const Vec3& p, const HullPrim& h) {
-  Vec3 best = Vec3::Zero();
-  double best2 = std::numeric_limits<double>::infinity();
-  for (int k = 0; k < 4; ++k) {
-    const Vec3& n = h.normal[k];
-    const double side = n.dot(p) - h.offset[k];  // > 0 outside; 0 for a flat face
-    if (side < 0 || (side == 0 && n != Vec3::Zero())) continue;
-    const auto& f = kHullFace[k];
-    const Vec3 v = triangle_offset(p, h.p[f[0]], h.p[f[1]], h.p[f[2]]);
-    if (v.squaredNorm() < best2) {
-      best = v;
-      best2 = v.squaredNorm();
-    }
-  }
-  return best;
-}
-
 // Golden-section minimum of a unimodal function on [0,1].
 template <class F>
 double golden_min(F f) {
@@ -132,8 +78,10 @@ double golden_min(F f) {
 }
 
 double linear_distance(const LinearPrim& lp, const Vec3& x) {
-  const Vec3 p = lp.to_local * (x - lp.origin);
+  const detail::Off pl = detail::to_piece(lp, x);
   const auto& e = lp.env;
+  if (e.disk_radius == 0) return std::sqrt(detail::ball_core_offset(lp, pl).norm2()) - e.corner_radius;
+  const Vec3 p(pl.x, pl.y, pl.z);
   const Vec3& d = lp.d_local;
   double core;
   switch (lp.kind) {
@@ -150,9 +98,7 @@ double linear_distance(const LinearPrim& lp, const Vec3& x) {
       core = prism_sd(a, b);
       break;
     }
-    case LinearPrim::Case::parallelogram:
-      core = parallelogram_dist(p, d, e.core_length);
-      break;
+    case LinearPrim::Case::parallelogram:  // a ball end's (measured above); the general case holds it too
     case LinearPrim::Case::general:
     default: {
       // K = disk(r) + [0,L] z + [0,1] d. Outside: distance is the minimum
@@ -221,6 +167,7 @@ LinearPrim make_linear(const Vec3& base0, const Vec3& base1, const tool::Revolve
   LinearPrim lp;
   lp.origin = base0;
   lp.to_local = R.transpose();  // rows: the tool frame's axes; the tool axis is local +Z
+  lp.axis_z = R == Eigen::Matrix3d::Identity();
   lp.d_local = lp.to_local * (base1 - base0);
   lp.env = env;
   const Vec3& d = lp.d_local;
@@ -332,6 +279,27 @@ void append_line(Sweep& s, const Vec3& tip0, const Vec3& tip1, const Eigen::Matr
 
 }  // namespace
 
+// p less its nearest point on the hull (a tetrahedron, possibly flat):
+// zero inside. The nearest point of a convex solid lies on a face whose
+// plane has the point outside: only those are measured (a flat hull's
+// faces always); none measured means inside.
+Vec3 detail::hull_offset(const Vec3& p, const HullPrim& h) {
+  Vec3 best = Vec3::Zero();
+  double best2 = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 4; ++k) {
+    const Vec3& n = h.normal[k];
+    const double side = n.dot(p) - h.offset[k];  // > 0 outside; 0 for a flat face
+    if (side < 0 || (side == 0 && n != Vec3::Zero())) continue;
+    const auto& f = kHullFace[k];
+    const Vec3 v = triangle_offset(p, h.p[f[0]], h.p[f[1]], h.p[f[2]]);
+    if (v.squaredNorm() < best2) {
+      best = v;
+      best2 = v.squaredNorm();
+    }
+  }
+  return best;
+}
+
 HullPrim hull_prim(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec3& p3, double radius) {
   HullPrim hp;
   hp.p[0] = p0;
@@ -365,33 +333,13 @@ double distance(const Primitive& p, const Vec3& x) {
     if constexpr (std::is_same_v<T, LinearPrim>) return linear_distance(q, x);
     else if constexpr (std::is_same_v<T, ArcPrim>) return arc_distance(q, x);
     else if constexpr (std::is_same_v<T, ProfilePrim>) return profile_distance(q, x);
-    else if constexpr (std::is_same_v<T, HullPrim>) return hull_offset(x, q).norm() - q.radius;
+    else if constexpr (std::is_same_v<T, HullPrim>) return detail::hull_offset(x, q).norm() - q.radius;
     else return tool::shape_distance(q.torus, q.to_local * (x - q.origin));
   }, p);
 }
 
 const Aabb& bounds(const Primitive& p) {
   return std::visit([](const auto& q) -> const Aabb& { return q.bounds; }, p);
-}
-
-bool convex_distance(const Primitive& p, const Vec3& x, double* d, Vec3* g) {
-  if (const auto* hp = std::get_if<HullPrim>(&p)) {
-    const Vec3 v = hull_offset(x, *hp);
-    const double n = v.norm();
-    *d = n - hp->radius;
-    *g = n > 0 ? Vec3(v / n) : Vec3::Zero();
-    return true;
-  }
-  const auto* lp = std::get_if<LinearPrim>(&p);
-  if (!lp || lp->kind != LinearPrim::Case::parallelogram) return false;
-  // The distance to a convex set (the core) less a radius: convex, and
-  // the unit offset from the nearest point is its gradient (0 on the core,
-  // a subgradient there). The same arithmetic as linear_distance.
-  const Vec3 v = parallelogram_offset(lp->to_local * (x - lp->origin), lp->d_local, lp->env.core_length);
-  const double n = v.norm();
-  *d = n - lp->env.corner_radius;
-  *g = n > 0 ? Vec3(lp->to_local.transpose() * (v / n)) : Vec3::Zero();
-  return true;
 }
 
 bool lipschitz(const Primitive& p) {

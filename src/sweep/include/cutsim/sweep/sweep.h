@@ -7,7 +7,10 @@
 // the boundary of lines and G17 arcs, and a lower bound (never larger than
 // the true depth) elsewhere. Lower bounds are what the stock update needs
 // for its conservative culling.
+#include <algorithm>
+#include <cmath>
 #include <functional>
+#include <limits>
 #include <variant>
 #include <vector>
 
@@ -21,6 +24,7 @@ namespace cutsim::sweep {
 struct LinearPrim {
   Vec3 origin;      ///< core base at the start (tip + core_offset * axis)
   Eigen::Matrix3d to_local;  ///< rows: u, v, w (w = tool axis)
+  bool axis_z = false;       ///< to_local is the identity (a 3-axis tool): no rotation to apply
   Vec3 d_local;     ///< the move in local coordinates
   tool::RevolvedEnvelope env;
   Aabb bounds;      ///< of the swept region
@@ -95,11 +99,12 @@ const Aabb& bounds(const Primitive& p);
 /// when sheared).
 bool lipschitz(const Primitive& p);
 /// Where the piece's distance is convex in x (a ball end's line: the
-/// distance to a flat convex core less the ball's radius), sets `d` to the
+/// distance to the parallelogram or segment its core sweeps less the
+/// ball's radius; a hull piece), sets `d` to the
 /// distance at `x` (the same value `distance` gives) and `g` to a
 /// subgradient, so d(y) >= d(x) + g . (y - x) for every y; else returns
 /// false and sets nothing.
-bool convex_distance(const Primitive& p, const Vec3& x, double* d, Vec3* g);
+inline bool convex_distance(const Primitive& p, const Vec3& x, double* d, Vec3* g);
 
 struct SweepOptions {
   /// Largest distance between an arc and the chords that stand for it where
@@ -146,5 +151,123 @@ Sweep sweep_tori(const std::vector<Pose>& poses, const tool::SwingTorus& torus);
 
 /// A single tool pose (no motion): the envelope at `tip` with axis +Z.
 Sweep tool_at(const Vec3& tip, const tool::Tool& tool);
+
+// ---------------------------------------------------------------------------
+// Inline: the distances the stock update evaluates per voxel, here so that
+// it inlines them (forced: GCC otherwise keeps the calls, a fifth of the
+// update). `distance` and `convex_distance` share this arithmetic, so both
+// give the same value to the bit.
+namespace detail {
+
+[[gnu::always_inline]] inline double clamp01(double t) { return t < 0 ? 0 : (t > 1 ? 1 : t); }
+
+// Written on scalars (in Eigen's order of operations, so the values are
+// those of the Eigen expressions to the bit): inlined, the Eigen
+// expressions were not.
+struct Off {
+  double x, y, z;
+  double norm2() const { return x * x + y * y + z * z; }
+};
+
+// p less its nearest point on the segment ab.
+[[gnu::always_inline]] inline Off seg_offset(const Off& p, const Off& a, const Off& b) {
+  const double abx = b.x - a.x, aby = b.y - a.y, abz = b.z - a.z;
+  const double l2 = abx * abx + aby * aby + abz * abz;
+  const double pax = p.x - a.x, pay = p.y - a.y, paz = p.z - a.z;
+  const double t = l2 > 0 ? clamp01((pax * abx + pay * aby + paz * abz) / l2) : 0.0;
+  return {pax - t * abx, pay - t * aby, paz - t * abz};
+}
+
+// p less its nearest point on the parallelogram {s d + t u : s, t in
+// [0,1]}, u = (0,0,L): its norm is the distance, and over the norm the
+// gradient.
+[[gnu::always_inline]] inline Off parallelogram_offset(const Off& p, const Off& d, double L) {
+  const Off o{0, 0, 0}, u{0, 0, L}, du{d.x, d.y, d.z + L};
+  // u is vertical, so the plane's normal d x u is level: (d.y, -d.x, 0) L.
+  const double r2 = d.x * d.x + d.y * d.y;
+  if (L * L * r2 < 1e-30) return seg_offset(p, o, du);
+  // In-plane coordinates (s, t) of p's projection: p = s d + t u + (normal).
+  const double ph = p.x * d.x + p.y * d.y;
+  const double s = ph / r2;
+  const double t = (p.z * r2 - ph * d.z) / (L * r2);
+  if (s >= 0 && s <= 1 && t >= 0 && t <= 1) {
+    const double k = (p.x * d.y - p.y * d.x) / r2;
+    return {k * d.y, -k * d.x, 0};
+  }
+  // Outside: the nearest point of a convex polygon lies on an edge whose
+  // line separates the point from it, so only the violated edges count.
+  Off best{0, 0, 0};
+  double best2 = std::numeric_limits<double>::infinity();
+  auto take = [&](const Off& v) {
+    const double v2 = v.norm2();
+    if (v2 < best2) best = v, best2 = v2;
+  };
+  // A side edge's nearest point to a point below its lower end is that
+  // end, which the bottom edge holds too: then only the bottom edge (as
+  // below a ball end's centre, where it cuts).
+  if (t < 0) take(seg_offset(p, o, d));
+  if (t > 1) take(seg_offset(p, u, du));
+  if (s < 0 && !(t < 0 && p.z <= 0)) take(seg_offset(p, o, u));
+  if (s > 1 && !(t < 0 && p.z <= d.z)) take(seg_offset(p, d, du));
+  return best;
+}
+
+// A ball end's core (a segment on the axis) moved along a line: x less its
+// nearest point on the parallelogram the core sweeps, in the piece's frame.
+// The vertical case is the segment the core's ends span.
+[[gnu::always_inline]] inline Off ball_core_offset(const LinearPrim& lp, const Off& p) {
+  const Vec3& dl = lp.d_local;
+  const Off d{dl.x(), dl.y(), dl.z()};
+  const double L = lp.env.core_length;
+  if (lp.kind == LinearPrim::Case::vertical)
+    return seg_offset(p, Off{0, 0, std::min(0.0, d.z)}, Off{0, 0, std::max(0.0, d.z) + L});
+  return parallelogram_offset(p, d, L);
+}
+
+/// A world point in the piece's frame.
+[[gnu::always_inline]] inline Off to_piece(const LinearPrim& lp, const Vec3& x) {
+  const double rx = x.x() - lp.origin.x(), ry = x.y() - lp.origin.y(), rz = x.z() - lp.origin.z();
+  if (lp.axis_z) return {rx, ry, rz};
+  const Eigen::Matrix3d& m = lp.to_local;
+  return {m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
+          m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz};
+}
+
+/// p less its nearest point on the hull (zero inside).
+Vec3 hull_offset(const Vec3& p, const HullPrim& h);
+
+}  // namespace detail
+
+[[gnu::always_inline]] inline bool convex_distance(const Primitive& p, const Vec3& x, double* d, Vec3* g) {
+  if (const auto* hp = std::get_if<HullPrim>(&p)) {
+    const Vec3 v = detail::hull_offset(x, *hp);
+    const double n = v.norm();
+    *d = n - hp->radius;
+    *g = n > 0 ? Vec3(v / n) : Vec3::Zero();
+    return true;
+  }
+  const auto* lp = std::get_if<LinearPrim>(&p);
+  if (!lp || lp->env.disk_radius != 0) return false;
+  // A ball end: the distance to a convex set (the core's sweep) less a
+  // radius, so convex, and the unit offset from the nearest point is its
+  // gradient (0 on the core, a subgradient there). The same arithmetic as
+  // linear_distance.
+  const detail::Off v = detail::ball_core_offset(*lp, detail::to_piece(*lp, x));
+  const double n = std::sqrt(v.norm2());
+  *d = n - lp->env.corner_radius;
+  if (!(n > 0)) {
+    *g = Vec3::Zero();
+  } else {
+    const double gx = v.x / n, gy = v.y / n, gz = v.z / n;
+    if (lp->axis_z) {
+      *g = Vec3(gx, gy, gz);
+    } else {
+      const Eigen::Matrix3d& m = lp->to_local;  // its transpose applied
+      *g = Vec3(m(0, 0) * gx + m(1, 0) * gy + m(2, 0) * gz, m(0, 1) * gx + m(1, 1) * gy + m(2, 1) * gz,
+                m(0, 2) * gx + m(1, 2) * gy + m(2, 2) * gz);
+    }
+  }
+  return true;
+}
 
 }  // namespace cutsim::sweep
