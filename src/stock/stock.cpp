@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <atomic>
 #include <bit>
@@ -348,9 +349,11 @@ Stock& Stock::operator=(Stock&&) noexcept = default;
 
 namespace {
 // Squared distance from p to the box (0 inside).
-double box_distance2(const Aabb& b, const Vec3& p) {
-  const Vec3 d = (b.min - p).cwiseMax(p - b.max).cwiseMax(0.0);
-  return d.squaredNorm();
+[[gnu::always_inline]] inline double box_distance2(const Aabb& b, const Vec3& p) {
+  const double dx = std::max(std::max(b.min.x() - p.x(), p.x() - b.max.x()), 0.0);
+  const double dy = std::max(std::max(b.min.y() - p.y(), p.y() - b.max.y()), 0.0);
+  const double dz = std::max(std::max(b.min.z() - p.z(), p.z() - b.max.z()), 0.0);
+  return dx * dx + dy * dy + dz * dz;
 }
 }  // namespace
 
@@ -419,6 +422,7 @@ constexpr std::int64_t kListLeaves = 4096;
 void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   Impl& m = *impl_;
   if (prims.empty()) return;
+  m.grid_volume_now.reset();
   auto& tree = m.grid->tree();
   const double g = m.gamma;
   const double h = m.h;
@@ -579,11 +583,19 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     }
     return air ? kAir : solid ? kSolid : kLeaf;
   };
+  // A voxel's offset from its quarter's centre, and its length, by its
+  // place in the quarter.
+  std::array<Vec3, 64> quarter_y;
+  std::array<double, 64> quarter_off;
+  for (int q = 0; q < 64; ++q) {
+    quarter_y[q] = h * Vec3((q >> 4) - 1.5, ((q >> 2) & 3) - 1.5, (q & 3) - 1.5);
+    quarter_off[q] = quarter_y[q].norm();
+  }
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
     std::vector<const sweep::Primitive*> cand;
     std::vector<Aabb> cbox;
     std::vector<double> ckey, seed_d;
-    std::vector<Vec3> cgrad, seed_g;
+    std::vector<Vec3> cgrad;
     std::vector<std::pair<double, std::uint32_t>> order, sub;
     // A piece near a quarter, in the order tried, with the bound its last
     // evaluation gives (positions relative to the quarter's centre).
@@ -642,7 +654,6 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         cgrad.push_back(pair_g[k]);
       }
       seed_d.resize(cand.size());
-      seed_g.resize(cand.size());
       const bool partial = !m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
       float* data = leaf->buffer().data();
       auto& mask = leaf->getValueMask();
@@ -669,11 +680,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           double dk;
           if (!std::isnan(gl.x())) {
             // Convex: the tangent plane at the leaf's centre, at its lowest
-            // over the quarter's voxels, bounds the piece there; and the
-            // plane at the quarter's centre seeds the voxels' bounds.
-            if (ckey[k] + gl.dot(cb - lc) - hq * gl.cwiseAbs().sum() >= need_max) continue;
-            sweep::convex_distance(*cand[k], cb, &dk, &seed_g[k]);
-            if (dk - hq * seed_g[k].cwiseAbs().sum() >= need_max) continue;
+            // over the quarter's voxels, bounds the piece there; its value
+            // at the quarter's centre (a lower bound, so a valid key) seeds
+            // the voxels' bounds.
+            dk = ckey[k] + gl.dot(cb - lc);
+            if (dk - hq * gl.cwiseAbs().sum() >= need_max) continue;
             seed_d[k] = dk;
           } else {
             dk = sweep::distance(*cand[k], cb);
@@ -701,7 +712,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           if (!std::isnan(seed_d[k])) {  // a convex piece's plane at the centre
             n.bound = Near::plane;
             n.c = seed_d[k];
-            n.grad = seed_g[k];
+            n.grad = cgrad[k];
           }
         }
         // A run whose pieces are all convex gets one bound for all of them
@@ -733,10 +744,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               const float v = data[idx];
               if (v >= m.gamma) continue;
               if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
+              const int q = ((ix - bx) << 4) | ((iy - by) << 2) | (iz - bz);
               const Vec3 p = lmin + h * Vec3(ix, iy, iz);
-              const Vec3 y = h * Vec3(ix - bx - 1.5, iy - by - 1.5, iz - bz - 1.5);  // p - cb
+              const Vec3& y = quarter_y[q];  // p - cb
+              const double off = quarter_off[q];
               const double need = -static_cast<double>(v);
-              const double off = y.norm();
               if (near[0].key - off >= need) continue;
               // Only d < -v changes the voxel; a piece farther than that (or
               // than the nearest piece so far) cannot matter.
@@ -945,7 +957,9 @@ double Stock::removed_volume_mm3() const {
   // The coverage integral counts h^2/4 too much per mm of the box's own
   // edges inside the grid, so cutting everything away would "remove" a
   // little more than the box: keep the figures physical.
-  return std::clamp(impl_->initial_grid_volume - impl_->grid_volume(), 0.0, impl_->box.volume());
+  Impl& m = *impl_;
+  if (!m.grid_volume_now) m.grid_volume_now = m.grid_volume();
+  return std::clamp(m.initial_grid_volume - *m.grid_volume_now, 0.0, m.box.volume());
 }
 
 double Stock::volume_mm3() const { return initial_volume_mm3() - removed_volume_mm3(); }

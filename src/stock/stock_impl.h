@@ -2,6 +2,7 @@
 // Private: the OpenVDB state behind Stock.
 #include <atomic>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include <openvdb/openvdb.h>
@@ -26,6 +27,9 @@ struct Stock::Impl {
     return origin + h * Vec3(c.x(), c.y(), c.z());
   }
   double grid_volume() const;
+  // grid_volume() as of the last change to the tree (a pass over every
+  // leaf; the report asks for it several times). Cleared by every cut.
+  std::optional<double> grid_volume_now;
 
   // Which 32^3 blocks of grid_index may hold material (a leaf, or a tile
   // at or below 0). A clear bit means all air: cuts and contact checks
