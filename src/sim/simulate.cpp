@@ -233,7 +233,11 @@ SimResult simulate(const SimOptions& opt) {
   // Pass 1: check the whole program, time it against the machine, find
   // where the cutting moves go, before any grid is built or output written.
   motion::InterpreterOptions iopt;
-  std::optional<Aabb> stock_box = opt.stock_box ? opt.stock_box : opt.job.stock_box;
+  // (Assigned, not copied from the ternary: GCC 12 then warns the payload
+  // may be read uninitialized.)
+  std::optional<Aabb> stock_box;
+  if (opt.stock_box) stock_box.emplace(*opt.stock_box);
+  else if (opt.job.stock_box) stock_box.emplace(*opt.job.stock_box);
   Aabb cut_path;  // tool tip path of feed moves, workpiece frame
   Planner::Options plopt;
   plopt.environment = env.empty() ? nullptr : &env;
