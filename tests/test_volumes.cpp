@@ -220,5 +220,58 @@ TEST(Volume, BatchedSubtractEqualsMoveByMove) {
   EXPECT_EQ(differ, 0u);
 }
 
+// Every voxel of the ROI, by block.
+std::map<std::tuple<double, double, double>, std::vector<float>> voxels_of(const stock::Stock& s) {
+  std::mutex mu;
+  std::map<std::tuple<double, double, double>, std::vector<float>> out;
+  s.for_each_roi_block([&](const stock::VoxelBlock& vb) {
+    std::vector<float> v;
+    for (int x = 0; x < vb.n[0]; ++x)
+      for (int y = 0; y < vb.n[1]; ++y)
+        for (int z = 0; z < vb.n[2]; ++z) v.push_back(vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z]);
+    std::lock_guard<std::mutex> lock(mu);
+    out[{vb.first_center.x(), vb.first_center.y(), vb.first_center.z()}] = std::move(v);
+  });
+  return out;
+}
+
+TEST(Volume, BatchAppliedInPartsEqualsWhole) {
+  // A batch whose (leaf, piece) pairs pass the budget is applied in parts,
+  // chunk by chunk of its pieces: the same voxels as applied whole, and as
+  // move by move; a ramp, a plunge and level passes of a ball end, crossing.
+  const Aabb box{Vec3(-1, -1, -1), Vec3(2, 2, 0)};
+  const tool::Tool t = tool::parse_tool_spec("ball:d=0.5", "test");
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  std::vector<sweep::Sweep> moves;
+  for (int k = 0; k < 12; ++k) {
+    const double y = -0.3 + 0.12 * k;
+    moves.push_back(sweep::sweep_line(Vec3(-0.2, y, -0.05 - 0.01 * (k % 3)), Vec3(1.4, y + 0.05, -0.12), I, t));
+  }
+  moves.push_back(sweep::sweep_line(Vec3(0.5, 0.5, 0.1), Vec3(0.5, 0.5, -0.3), I, t));  // plunge
+  moves.push_back(sweep::sweep_line(Vec3(0.0, 1.2, -0.2), Vec3(1.0, -0.2, -0.08), I, t));  // across
+  stock::StockOptions whole_opt;
+  whole_opt.voxel_mm = 0.02;
+  stock::StockOptions parts_opt = whole_opt;
+  parts_opt.max_update_pairs = 50;
+  stock::Stock whole(box, box, whole_opt), parts(box, box, parts_opt), one(box, box, whole_opt);
+  whole.subtract(moves);
+  parts.subtract(moves);
+  for (const auto& m : moves) one.subtract(m);
+  EXPECT_EQ(whole.stats().update_calls, 1u);
+  EXPECT_GE(parts.stats().update_calls, 5u);  // the budget really split it (8 pieces, then one by one)
+  EXPECT_GT(whole.removed_volume_mm3(), 0.2);
+  EXPECT_EQ(whole.removed_volume_mm3(), parts.removed_volume_mm3());
+  const auto a = voxels_of(whole), b = voxels_of(parts), c = voxels_of(one);
+  ASSERT_EQ(a.size(), b.size());
+  ASSERT_EQ(a.size(), c.size());
+  std::size_t differ_parts = 0, differ_one = 0;
+  for (const auto& [k, v] : a) {
+    differ_parts += v != b.at(k);
+    differ_one += v != c.at(k);
+  }
+  EXPECT_EQ(differ_parts, 0u);
+  EXPECT_EQ(differ_one, 0u);
+}
+
 }  // namespace
 }  // namespace cutsim::test

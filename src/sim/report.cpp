@@ -93,6 +93,7 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   j["contacts"] = cs;
   j["active_voxels"] = st.active_voxels;
   j["voxel_evaluations"] = st.voxel_evaluations;
+  j["stock_update_batches"] = st.update_calls;
   j["leaf_nodes"] = st.leaf_nodes;
   j["idle_leaves"] = st.idle_leaves;
   j["grid_memory_mb"] = static_cast<double>(st.memory_bytes) / 1048576.0;
@@ -106,7 +107,9 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
                    {"export", r.timing.export_s}, {"total", r.timing.total_s},
                    {"stock_build", r.timing.stock_build_s}, {"plan_and_sweep", r.timing.plan_sweep_s},
                    {"stock_update", r.timing.stock_update_s}, {"contact_check", r.timing.contact_check_s},
-                   {"mesh", r.timing.mesh_s}, {"compare", r.timing.compare_s}, {"write", r.timing.write_s}};
+                   {"mesh", r.timing.mesh_s}, {"compare", r.timing.compare_s}, {"write", r.timing.write_s},
+                   {"stock_update_steps", {{"bin", st.bin_s}, {"classify", st.classify_s},
+                                           {"topology", st.topology_s}, {"voxels", st.voxels_s}}}};
   j["peak_rss_simulate_mb"] = r.timing.peak_rss_simulate_mb;
   j["peak_rss_mb"] = peak_rss_mb();
   return j.dump(2) + "\n";

@@ -383,12 +383,13 @@ SimResult simulate(const SimOptions& opt) {
   // contact check finds a touch, it first subtracts the batch. The union
   // removed does not depend on where batches end; they start small (an
   // interrupt or --partial soon has a result) and double up to a number
-  // of moves, pieces and leaves (the memory the binning takes). Sizes
-  // follow the program only, so runs repeat exactly.
-  constexpr std::size_t kMaxBatchMoves = 4096, kBatchPrims = 16384, kBatchLeaves = std::size_t(1) << 21;
+  // of moves and pieces. Sizes follow the program only, so runs repeat
+  // exactly. (The stock bounds the memory of binning a batch itself, by
+  // the leaves its pieces really reach.)
+  constexpr std::size_t kMaxBatchMoves = 4096, kBatchPrims = 16384;
   std::size_t batch_moves = 8;
   std::vector<sweep::Sweep> pending;
-  std::size_t pending_prims = 0, pending_leaves = 0;
+  std::size_t pending_prims = 0;
   int pending_last_line = 0;
   double flush_s = 0;  // stock update time spent inside the contact check
   auto flush = [&] {
@@ -401,7 +402,7 @@ SimResult simulate(const SimOptions& opt) {
     if (!interrupted()) res.last_line_cut = pending_last_line;
     batch_moves = std::min(2 * batch_moves, kMaxBatchMoves);
     pending.clear();
-    pending_prims = pending_leaves = 0;
+    pending_prims = 0;
   };
   try {
   stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
@@ -420,12 +421,11 @@ SimResult simulate(const SimOptions& opt) {
     res.timing.contact_check_s += seconds_since(t1) - flush_s;
     if (!sw.prims.empty() && sw.bounds.overlaps(res.stock->roi().expanded(res.stock->band_mm() + res.voxel_mm))) {
       pending_prims += sw.prims.size();
-      for (const auto& p : sw.prims) pending_leaves += res.stock->leaves_in(sweep::bounds(p));
       pending.push_back(std::move(sw));
     }
     pending_last_line = m.line;
     if (pending.empty() && !interrupted()) res.last_line_cut = m.line;  // nothing of it waits to be cut
-    if (pending.size() >= batch_moves || pending_prims >= kBatchPrims || pending_leaves >= kBatchLeaves ||
+    if (pending.size() >= batch_moves || pending_prims >= kBatchPrims ||
         (touched && stop_at_contact))
       flush();
     if (interrupted())

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <atomic>
 #include <bit>
+#include <chrono>
 #include <cstdint>
 #include <mutex>
 #include <sstream>
@@ -232,6 +233,7 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
   m.box = box;
   m.h = opt.voxel_mm;
   m.gamma = static_cast<float>(opt.half_band_voxels * m.h);
+  m.max_pairs = std::max<std::size_t>(1, opt.max_update_pairs);
   const Aabb roi = roi_in.intersected(box.expanded(m.gamma + m.h));
   if (roi.empty()) throw GeometryError({}, "the region the tools reach does not meet the stock");
 
@@ -417,6 +419,9 @@ double bounded_key(double d, const sweep::Primitive& p) {
 // the piece's distance instead of listed whole.
 constexpr std::int64_t kListLeaves = 4096;
 
+// Pieces binned per parallel chunk, at most.
+constexpr std::size_t kBinChunk = 256;
+
 }  // namespace
 
 void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
@@ -440,8 +445,363 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     subtract_prims(std::vector<const sweep::Primitive*>(mid, prims.end()));
     return;
   }
+  auto t_lap = std::chrono::steady_clock::now();
+  auto lap = [&t_lap](double& acc) {
+    const auto t = std::chrono::steady_clock::now();
+    acc += std::chrono::duration<double>(t - t_lap).count();
+    t_lap = t;
+  };
+  // Steps 2-4 on the pairs binned so far (sorted here).
+  auto apply = [&](std::vector<std::uint64_t>& pairs) {
+    if (pairs.empty() || interrupted()) {
+      lap(m.bin_s);
+      return;
+    }
+    ++m.update_calls;
+    tbb::parallel_sort(pairs.begin(), pairs.end());
+    std::vector<std::size_t> group;  // start of each leaf's run of keys
+    for (std::size_t i = 0; i < pairs.size(); ++i)
+      if (i == 0 || keys.leaf_of(pairs[i]) != keys.leaf_of(pairs[i - 1])) group.push_back(i);
+    group.push_back(pairs.size());
+    const std::size_t ng = group.size() - 1;
+    lap(m.bin_s);
+
+    // 2. Classify each leaf, in parallel (the tree is only read): by the
+    //    distance at its centre, a lower bound for its voxels outside the
+    //    cut, against the deepest material it holds.
+    enum Action : char { skip, to_air, update };
+    std::vector<char> action(ng, skip);
+    // Each piece's distance at the leaf's centre: outside the piece (d > 0)
+    // it is exact, so d - |p - centre| bounds the piece's distance at p.
+    // A ball end's piece is convex: its gradient there too, so the tangent
+    // plane at the centre bounds it over the leaf (NaN for other pieces).
+    std::vector<double>& pair_d = m.scratch_d;  // every entry written below
+    std::vector<Vec3>& pair_g = m.scratch_g;
+    pair_d.resize(pairs.size());
+    pair_g.resize(pairs.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ng), [&](const auto& r) {
+      if (interrupted()) return;
+      for (std::size_t gi = r.begin(); gi != r.end(); ++gi) {
+        if (interrupted()) return;
+        const Coord o = keys.origin(pairs[group[gi]]);
+        const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
+        double d = std::numeric_limits<double>::infinity();
+        for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
+          const sweep::Primitive& piece = *prims[keys.piece(pairs[k])];
+          if (!sweep::convex_distance(piece, c0, &pair_d[k], &pair_g[k])) {
+            pair_d[k] = sweep::distance(piece, c0);
+            pair_g[k] = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
+          }
+          d = std::min(d, pair_d[k]);
+        }
+        if (d > g + hd0) continue;
+        const bool whole = m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
+        if (d < -(g + hd0) && whole) {
+          action[gi] = to_air;
+          continue;
+        }
+        // Only d(p) < -v(p) changes a voxel, and d(p) >= d - hd0 outside the
+        // cut: a leaf whose deepest material is shallower than that stays.
+        const LeafT* leaf = tree.probeConstLeaf(o);
+        double vmin;
+        if (leaf) {
+          vmin = leaf_min(leaf->buffer().data());
+        } else {
+          vmin = tree.getValue(o);
+          if (vmin > 0) continue;  // air tile
+        }
+        if (d - hd0 >= std::max(-vmin, 0.0)) continue;
+        action[gi] = update;
+      }
+    });
+    lap(m.classify_s);
+    if (interrupted()) return;
+
+    // 3. Topology, on one thread: split the material tiles the band reaches
+    //    into leaves (else the cut is lost); leaves wholly inside the cut
+    //    become air tiles.
+    std::vector<LeafT*> leaves;
+    std::vector<std::size_t> leaf_group;
+    std::vector<Coord> aired;  // blocks that may now hold only air
+    auto block_of = [](const Coord& o) { return Coord(o.x() & ~(kMid - 1), o.y() & ~(kMid - 1), o.z() & ~(kMid - 1)); };
+    for (std::size_t gi = 0; gi < ng; ++gi) {
+      if (action[gi] == skip) continue;
+      const Coord o = keys.origin(pairs[group[gi]]);
+      if (action[gi] == to_air) {
+        if (tree.probeLeaf(o) || tree.getValue(o) <= 0) {
+          tree.addTile(1, o, m.gamma, false);
+          aired.push_back(block_of(o));
+        }
+        continue;
+      }
+      leaves.push_back(tree.touchLeaf(o));
+      leaf_group.push_back(gi);
+    }
+    if (leaves.empty()) {
+      m.refresh_occupancy(std::move(aired));
+      lap(m.topology_s);
+      return;
+    }
+    lap(m.topology_s);
+
+    // 4. Voxels, in parallel: new = max(old, -tool), clamped to the band.
+    const double hd_sub = std::sqrt(3.0) * 1.5 * h;
+    // A leaf with no material left becomes an air tile; one the band split
+    // from a material tile but left whole, a material tile again.
+    enum : char { kLeaf, kAir, kSolid };
+    std::vector<char> tiled(leaves.size(), kLeaf);
+    auto leaf_state = [gamma = m.gamma](const float* data) {
+      bool air = true, solid = true;
+      for (int idx = 0; idx < 512 && (air || solid); ++idx) {
+        air = air && data[idx] >= gamma;
+        solid = solid && data[idx] <= -gamma;
+      }
+      return air ? kAir : solid ? kSolid : kLeaf;
+    };
+    // A voxel's offset from its quarter's centre, and its length, by its
+    // place in the quarter.
+    std::array<Vec3, 64> quarter_y;
+    std::array<double, 64> quarter_off;
+    for (int q = 0; q < 64; ++q) {
+      quarter_y[q] = h * Vec3((q >> 4) - 1.5, ((q >> 2) & 3) - 1.5, (q & 3) - 1.5);
+      quarter_off[q] = quarter_y[q].norm();
+    }
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
+      std::vector<const sweep::Primitive*> cand;
+      std::vector<Aabb> cbox;
+      std::vector<double> ckey, seed_d;
+      std::vector<Vec3> cgrad;
+      std::vector<std::pair<double, std::uint32_t>> order, sub;
+      // A piece near a quarter, in the order tried, with the bound its last
+      // evaluation gives (positions relative to the quarter's centre).
+      struct Near {
+        double key;  // distance at the quarter's centre (bounded_key)
+        const sweep::Primitive* prim;
+        const Aabb* box;
+        enum Bound : char { none, plane, cone } bound;
+        double c;  // plane: d(y) >= c + grad . y; cone: d(y) >= c - |y - at|
+        Vec3 grad, at;
+      };
+      std::vector<Near> near;
+      // Runs of kRun pieces in that order, bounded together from their
+      // planes at the quarter's centre: min c + mean grad . y - spread |y|.
+      constexpr std::size_t kRun = 8;
+      struct Run {
+        double c, spread;
+        Vec3 grad;
+      };
+      std::vector<Run> runs;
+      if (interrupted()) return;  // the run is abandoned; stop quickly
+      for (std::size_t i = r.begin(); i != r.end(); ++i) {
+        if (interrupted()) return;
+        LeafT* leaf = leaves[i];
+        const std::size_t gi = leaf_group[i];
+        const Coord o = leaf->origin();
+        const Vec3 lmin = m.origin + h * Vec3(o.x(), o.y(), o.z());
+        const Vec3 lc = lmin + Vec3::Constant(0.5 * h * (kLeafDim - 1));
+        const Aabb lbox{lmin, lmin + Vec3::Constant(h * (kLeafDim - 1))};
+        // Nearest pieces first, by their distance at the centre: the running
+        // minimum then lets the rest be cut off by that distance less the
+        // voxel's offset from the centre. That bounds a piece outside it, and
+        // inside too where its distance is 1-Lipschitz there (a ball end's
+        // line): the pieces a voxel is deep in are tried first, and the many
+        // that overlap it less deeply are passed over. Other pieces the
+        // centre is inside of have no bound (key -inf).
+        order.clear();
+        for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
+          const std::uint32_t id = keys.piece(pairs[k]);
+          if (sweep::bounds(*prims[id]).expanded(g).overlaps(lbox))
+            order.emplace_back(bounded_key(pair_d[k], *prims[id]), static_cast<std::uint32_t>(k));
+        }
+        if (order.empty()) {  // split from a tile for nothing
+          tiled[i] = leaf_state(leaf->buffer().data());
+          continue;
+        }
+        std::sort(order.begin(), order.end());
+        cand.clear();
+        cbox.clear();
+        ckey.clear();
+        cgrad.clear();
+        for (const auto& [key, k] : order) {
+          cand.push_back(prims[keys.piece(pairs[k])]);
+          cbox.push_back(sweep::bounds(*cand.back()));
+          ckey.push_back(key);
+          cgrad.push_back(pair_g[k]);
+        }
+        seed_d.resize(cand.size());
+        const bool partial = !m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
+        float* data = leaf->buffer().data();
+        auto& mask = leaf->getValueMask();
+        bool air = true;
+        std::uint64_t evaluated = 0;
+        // Each 4 x 4 x 4 quarter of the leaf on its own: the pieces' distances
+        // at its centre bound its voxels' more tightly than the leaf's.
+        for (int sb = 0; sb < 8; ++sb) {
+          const int bx = (sb >> 2) * 4, by = ((sb >> 1) & 1) * 4, bz = (sb & 1) * 4;
+          const float vmin = quarter_min(data, bx, by, bz);
+          if (vmin >= m.gamma) continue;  // all air: stays air
+          air = false;
+          const double need_max = -static_cast<double>(vmin);  // the largest -v here
+          const Vec3 cb = lmin + h * Vec3(bx + 1.5, by + 1.5, bz + 1.5);
+          const double oc = (cb - lc).norm();
+          const double hq = 1.5 * h;  // the quarter's half width between voxel centres
+          sub.clear();
+          for (std::size_t k = 0; k < cand.size(); ++k) {
+            if (ckey[k] - oc - hd_sub >= need_max) break;  // and every piece after it
+            const double b2 = box_distance2(cbox[k], cb);
+            const double reach = need_max + hd_sub;
+            if (b2 > 0 && (reach <= 0 || b2 >= reach * reach)) continue;
+            const Vec3& gl = cgrad[k];
+            double dk;
+            if (!std::isnan(gl.x())) {
+              // Convex: the tangent plane at the leaf's centre, at its lowest
+              // over the quarter's voxels, bounds the piece there; its value
+              // at the quarter's centre (a lower bound, so a valid key) seeds
+              // the voxels' bounds.
+              dk = ckey[k] + gl.dot(cb - lc);
+              if (dk - hq * gl.cwiseAbs().sum() >= need_max) continue;
+              seed_d[k] = dk;
+            } else {
+              dk = sweep::distance(*cand[k], cb);
+              seed_d[k] = std::numeric_limits<double>::quiet_NaN();
+            }
+            const double key = bounded_key(dk, *cand[k]);
+            if (key - hd_sub >= need_max) continue;
+            sub.emplace_back(key, static_cast<std::uint32_t>(k));
+          }
+          if (sub.empty()) continue;
+          std::sort(sub.begin(), sub.end());
+          // Where every piece's distance is 1-Lipschitz, each piece's value at
+          // the voxel it was last evaluated at bounds it here too, less the
+          // distance between the two (far tighter than the quarter centre's),
+          // and the piece nearest at the last voxel is tried first, so the bar
+          // the others must clear is low from the start. (Not with profile
+          // prisms: their first-order distance would make the voxels depend
+          // on the order the pieces are tried in.)
+          constexpr std::size_t none = std::numeric_limits<std::size_t>::max();
+          bool reuse = true;
+          near.clear();
+          for (const auto& [key, k] : sub) {
+            reuse = reuse && sweep::lipschitz(*cand[k]);
+            Near& n = near.emplace_back(Near{key, cand[k], &cbox[k], Near::none, 0, Vec3::Zero(), Vec3::Zero()});
+            if (!std::isnan(seed_d[k])) {  // a convex piece's plane at the centre
+              n.bound = Near::plane;
+              n.c = seed_d[k];
+              n.grad = cgrad[k];
+            }
+          }
+          // A run whose pieces are all convex gets one bound for all of them
+          // (its planes at the centre are nearly parallel where many short
+          // pieces of one path pass a voxel); else it is never skipped whole.
+          runs.clear();
+          for (std::size_t j0 = 0; j0 < near.size(); j0 += kRun) {
+            const std::size_t j1 = std::min(j0 + kRun, near.size());
+            Run r{std::numeric_limits<double>::infinity(), 0, Vec3::Zero()};
+            bool convex = true;
+            for (std::size_t j = j0; j < j1; ++j) {
+              convex = convex && near[j].bound == Near::plane;
+              r.c = std::min(r.c, near[j].c);
+              r.grad += near[j].grad;
+            }
+            if (!convex) {
+              runs.push_back({-std::numeric_limits<double>::infinity(), 0, Vec3::Zero()});
+              continue;
+            }
+            r.grad /= static_cast<double>(j1 - j0);
+            for (std::size_t j = j0; j < j1; ++j) r.spread = std::max(r.spread, (near[j].grad - r.grad).norm());
+            runs.push_back(r);
+          }
+          std::size_t nearest = none;
+          for (int ix = bx; ix < bx + 4; ++ix)
+            for (int iy = by; iy < by + 4; ++iy)
+              for (int iz = bz; iz < bz + 4; ++iz) {
+                const int idx = (ix << 6) | (iy << 3) | iz;
+                const float v = data[idx];
+                if (v >= m.gamma) continue;
+                if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
+                const int q = ((ix - bx) << 4) | ((iy - by) << 2) | (iz - bz);
+                const Vec3 p = lmin + h * Vec3(ix, iy, iz);
+                const Vec3& y = quarter_y[q];  // p - cb
+                const double off = quarter_off[q];
+                const double need = -static_cast<double>(v);
+                if (near[0].key - off >= need) continue;
+                // Only d < -v changes the voxel; a piece farther than that (or
+                // than the nearest piece so far) cannot matter.
+                double d = std::numeric_limits<double>::infinity();
+                std::size_t best = none;
+                auto eval = [&](std::size_t j) {
+                  Near& n = near[j];
+                  double dj;
+                  if (!reuse) {
+                    dj = sweep::distance(*n.prim, p);
+                  } else if (sweep::convex_distance(*n.prim, p, &dj, &n.grad)) {
+                    n.bound = Near::plane;
+                    n.c = dj - n.grad.dot(y);
+                  } else {
+                    dj = sweep::distance(*n.prim, p);
+                    n.bound = Near::cone;
+                    n.c = dj;
+                    n.at = y;
+                  }
+                  if (dj < d) {
+                    d = dj;
+                    best = j;
+                  }
+                };
+                if (nearest != none) eval(nearest);
+                for (std::size_t j = 0; j < near.size() && d > -g; ++j) {  // at -g: clamped to air whatever the rest
+                  const double thr = std::min(d, need);
+                  const Near& n = near[j];
+                  if (n.key - off >= thr) break;  // and every piece after it
+                  if (j % kRun == 0) {
+                    const Run& r = runs[j / kRun];
+                    if (r.c + r.grad.dot(y) - r.spread * off >= thr) {
+                      j += kRun - 1;  // the whole run
+                      continue;
+                    }
+                  }
+                  if (j == nearest) continue;
+                  // Convex pieces: the tangent plane at the last voxel; other
+                  // 1-Lipschitz pieces: the last value less the step.
+                  if (n.bound == Near::plane && n.c + n.grad.dot(y) >= thr) continue;
+                  if (n.bound == Near::cone && n.c - (y - n.at).norm() >= thr) continue;
+                  const double b2 = box_distance2(*n.box, p);
+                  if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
+                  eval(j);
+                }
+                if (reuse && best != none) nearest = best;
+                ++evaluated;
+                if (-d > v) {
+                  const float nv = static_cast<float>(std::min(-d, g));
+                  data[idx] = nv;
+                  mask.set(static_cast<openvdb::Index>(idx), nv < m.gamma && nv > -m.gamma);
+                }
+              }
+        }
+        tiled[i] = air ? kAir : leaf_state(data);
+        m.voxel_evaluations.fetch_add(evaluated, std::memory_order_relaxed);
+      }
+    });
+    lap(m.voxels_s);
+    for (std::size_t i = 0; i < leaves.size(); ++i) {
+      if (tiled[i] == kLeaf) continue;
+      const Coord o = leaves[i]->origin();
+      if (tiled[i] == kAir) aired.push_back(block_of(o));
+      tree.addTile(1, o, tiled[i] == kAir ? m.gamma : -m.gamma, false);
+    }
+    m.refresh_occupancy(std::move(aired));
+    lap(m.topology_s);
+  };
+
+  // 1, in chunks of pieces: the pairs binned so far are applied whenever
+  // they pass max_pairs (about 40 bytes each while they are: the key, the
+  // piece's distance and gradient at the leaf's centre), so the binning's
+  // memory is bounded by what the
+  // pieces really reach, not by their boxes (a roughing piece at 1 um
+  // reaches some 450k leaves). Where a batch is split follows the counts
+  // only, so runs repeat exactly; the union removed does not depend on it.
   std::vector<std::vector<std::uint64_t>> per_prim(prims.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, prims.size()), [&](const auto& r) {
+  auto bin = [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (interrupted()) return;  // abandoned: the caller throws
       const sweep::Primitive& p = *prims[i];
@@ -477,343 +837,33 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             leaf);
       }
     }
-  });
-  std::vector<std::uint64_t> pairs;
-  {
-    std::size_t n = 0;
-    for (const auto& v : per_prim) n += v.size();
-    pairs.reserve(n);
-    for (auto& v : per_prim) {
-      pairs.insert(pairs.end(), v.begin(), v.end());
-      std::vector<std::uint64_t>().swap(v);
-    }
-  }
-  if (pairs.empty() || interrupted()) return;
-  tbb::parallel_sort(pairs.begin(), pairs.end());
-  std::vector<std::size_t> group;  // start of each leaf's run of keys
-  for (std::size_t i = 0; i < pairs.size(); ++i)
-    if (i == 0 || keys.leaf_of(pairs[i]) != keys.leaf_of(pairs[i - 1])) group.push_back(i);
-  group.push_back(pairs.size());
-  const std::size_t ng = group.size() - 1;
-
-  // 2. Classify each leaf, in parallel (the tree is only read): by the
-  //    distance at its centre, a lower bound for its voxels outside the
-  //    cut, against the deepest material it holds.
-  enum Action : char { skip, to_air, update };
-  std::vector<char> action(ng, skip);
-  // Each piece's distance at the leaf's centre: outside the piece (d > 0)
-  // it is exact, so d - |p - centre| bounds the piece's distance at p.
-  // A ball end's piece is convex: its gradient there too, so the tangent
-  // plane at the centre bounds it over the leaf (NaN for other pieces).
-  std::vector<double> pair_d(pairs.size());
-  std::vector<Vec3> pair_g(pairs.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ng), [&](const auto& r) {
-    if (interrupted()) return;
-    for (std::size_t gi = r.begin(); gi != r.end(); ++gi) {
-      if (interrupted()) return;
-      const Coord o = keys.origin(pairs[group[gi]]);
-      const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
-      double d = std::numeric_limits<double>::infinity();
-      for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
-        const sweep::Primitive& piece = *prims[keys.piece(pairs[k])];
-        if (!sweep::convex_distance(piece, c0, &pair_d[k], &pair_g[k])) {
-          pair_d[k] = sweep::distance(piece, c0);
-          pair_g[k] = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
-        }
-        d = std::min(d, pair_d[k]);
-      }
-      if (d > g + hd0) continue;
-      const bool whole = m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
-      if (d < -(g + hd0) && whole) {
-        action[gi] = to_air;
-        continue;
-      }
-      // Only d(p) < -v(p) changes a voxel, and d(p) >= d - hd0 outside the
-      // cut: a leaf whose deepest material is shallower than that stays.
-      const LeafT* leaf = tree.probeConstLeaf(o);
-      double vmin;
-      if (leaf) {
-        vmin = leaf_min(leaf->buffer().data());
-      } else {
-        vmin = tree.getValue(o);
-        if (vmin > 0) continue;  // air tile
-      }
-      if (d - hd0 >= std::max(-vmin, 0.0)) continue;
-      action[gi] = update;
-    }
-  });
-  if (interrupted()) return;
-
-  // 3. Topology, on one thread: split the material tiles the band reaches
-  //    into leaves (else the cut is lost); leaves wholly inside the cut
-  //    become air tiles.
-  std::vector<LeafT*> leaves;
-  std::vector<std::size_t> leaf_group;
-  std::vector<Coord> aired;  // blocks that may now hold only air
-  auto block_of = [](const Coord& o) { return Coord(o.x() & ~(kMid - 1), o.y() & ~(kMid - 1), o.z() & ~(kMid - 1)); };
-  for (std::size_t gi = 0; gi < ng; ++gi) {
-    if (action[gi] == skip) continue;
-    const Coord o = keys.origin(pairs[group[gi]]);
-    if (action[gi] == to_air) {
-      if (tree.probeLeaf(o) || tree.getValue(o) <= 0) {
-        tree.addTile(1, o, m.gamma, false);
-        aired.push_back(block_of(o));
-      }
-      continue;
-    }
-    leaves.push_back(tree.touchLeaf(o));
-    leaf_group.push_back(gi);
-  }
-  if (leaves.empty()) {
-    m.refresh_occupancy(std::move(aired));
-    return;
-  }
-
-  // 4. Voxels, in parallel: new = max(old, -tool), clamped to the band.
-  const double hd_sub = std::sqrt(3.0) * 1.5 * h;
-  // A leaf with no material left becomes an air tile; one the band split
-  // from a material tile but left whole, a material tile again.
-  enum : char { kLeaf, kAir, kSolid };
-  std::vector<char> tiled(leaves.size(), kLeaf);
-  auto leaf_state = [gamma = m.gamma](const float* data) {
-    bool air = true, solid = true;
-    for (int idx = 0; idx < 512 && (air || solid); ++idx) {
-      air = air && data[idx] >= gamma;
-      solid = solid && data[idx] <= -gamma;
-    }
-    return air ? kAir : solid ? kSolid : kLeaf;
   };
-  // A voxel's offset from its quarter's centre, and its length, by its
-  // place in the quarter.
-  std::array<Vec3, 64> quarter_y;
-  std::array<double, 64> quarter_off;
-  for (int q = 0; q < 64; ++q) {
-    quarter_y[q] = h * Vec3((q >> 4) - 1.5, ((q >> 2) & 3) - 1.5, (q & 3) - 1.5);
-    quarter_off[q] = quarter_y[q].norm();
-  }
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
-    std::vector<const sweep::Primitive*> cand;
-    std::vector<Aabb> cbox;
-    std::vector<double> ckey, seed_d;
-    std::vector<Vec3> cgrad;
-    std::vector<std::pair<double, std::uint32_t>> order, sub;
-    // A piece near a quarter, in the order tried, with the bound its last
-    // evaluation gives (positions relative to the quarter's centre).
-    struct Near {
-      double key;  // distance at the quarter's centre (bounded_key)
-      const sweep::Primitive* prim;
-      const Aabb* box;
-      enum Bound : char { none, plane, cone } bound;
-      double c;  // plane: d(y) >= c + grad . y; cone: d(y) >= c - |y - at|
-      Vec3 grad, at;
-    };
-    std::vector<Near> near;
-    // Runs of kRun pieces in that order, bounded together from their
-    // planes at the quarter's centre: min c + mean grad . y - spread |y|.
-    constexpr std::size_t kRun = 8;
-    struct Run {
-      double c, spread;
-      Vec3 grad;
-    };
-    std::vector<Run> runs;
-    if (interrupted()) return;  // the run is abandoned; stop quickly
-    for (std::size_t i = r.begin(); i != r.end(); ++i) {
-      if (interrupted()) return;
-      LeafT* leaf = leaves[i];
-      const std::size_t gi = leaf_group[i];
-      const Coord o = leaf->origin();
-      const Vec3 lmin = m.origin + h * Vec3(o.x(), o.y(), o.z());
-      const Vec3 lc = lmin + Vec3::Constant(0.5 * h * (kLeafDim - 1));
-      const Aabb lbox{lmin, lmin + Vec3::Constant(h * (kLeafDim - 1))};
-      // Nearest pieces first, by their distance at the centre: the running
-      // minimum then lets the rest be cut off by that distance less the
-      // voxel's offset from the centre. That bounds a piece outside it, and
-      // inside too where its distance is 1-Lipschitz there (a ball end's
-      // line): the pieces a voxel is deep in are tried first, and the many
-      // that overlap it less deeply are passed over. Other pieces the
-      // centre is inside of have no bound (key -inf).
-      order.clear();
-      for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
-        const std::uint32_t id = keys.piece(pairs[k]);
-        if (sweep::bounds(*prims[id]).expanded(g).overlaps(lbox))
-          order.emplace_back(bounded_key(pair_d[k], *prims[id]), static_cast<std::uint32_t>(k));
-      }
-      if (order.empty()) {  // split from a tile for nothing
-        tiled[i] = leaf_state(leaf->buffer().data());
-        continue;
-      }
-      std::sort(order.begin(), order.end());
-      cand.clear();
-      cbox.clear();
-      ckey.clear();
-      cgrad.clear();
-      for (const auto& [key, k] : order) {
-        cand.push_back(prims[keys.piece(pairs[k])]);
-        cbox.push_back(sweep::bounds(*cand.back()));
-        ckey.push_back(key);
-        cgrad.push_back(pair_g[k]);
-      }
-      seed_d.resize(cand.size());
-      const bool partial = !m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
-      float* data = leaf->buffer().data();
-      auto& mask = leaf->getValueMask();
-      bool air = true;
-      std::uint64_t evaluated = 0;
-      // Each 4 x 4 x 4 quarter of the leaf on its own: the pieces' distances
-      // at its centre bound its voxels' more tightly than the leaf's.
-      for (int sb = 0; sb < 8; ++sb) {
-        const int bx = (sb >> 2) * 4, by = ((sb >> 1) & 1) * 4, bz = (sb & 1) * 4;
-        const float vmin = quarter_min(data, bx, by, bz);
-        if (vmin >= m.gamma) continue;  // all air: stays air
-        air = false;
-        const double need_max = -static_cast<double>(vmin);  // the largest -v here
-        const Vec3 cb = lmin + h * Vec3(bx + 1.5, by + 1.5, bz + 1.5);
-        const double oc = (cb - lc).norm();
-        const double hq = 1.5 * h;  // the quarter's half width between voxel centres
-        sub.clear();
-        for (std::size_t k = 0; k < cand.size(); ++k) {
-          if (ckey[k] - oc - hd_sub >= need_max) break;  // and every piece after it
-          const double b2 = box_distance2(cbox[k], cb);
-          const double reach = need_max + hd_sub;
-          if (b2 > 0 && (reach <= 0 || b2 >= reach * reach)) continue;
-          const Vec3& gl = cgrad[k];
-          double dk;
-          if (!std::isnan(gl.x())) {
-            // Convex: the tangent plane at the leaf's centre, at its lowest
-            // over the quarter's voxels, bounds the piece there; its value
-            // at the quarter's centre (a lower bound, so a valid key) seeds
-            // the voxels' bounds.
-            dk = ckey[k] + gl.dot(cb - lc);
-            if (dk - hq * gl.cwiseAbs().sum() >= need_max) continue;
-            seed_d[k] = dk;
-          } else {
-            dk = sweep::distance(*cand[k], cb);
-            seed_d[k] = std::numeric_limits<double>::quiet_NaN();
-          }
-          const double key = bounded_key(dk, *cand[k]);
-          if (key - hd_sub >= need_max) continue;
-          sub.emplace_back(key, static_cast<std::uint32_t>(k));
-        }
-        if (sub.empty()) continue;
-        std::sort(sub.begin(), sub.end());
-        // Where every piece's distance is 1-Lipschitz, each piece's value at
-        // the voxel it was last evaluated at bounds it here too, less the
-        // distance between the two (far tighter than the quarter centre's),
-        // and the piece nearest at the last voxel is tried first, so the bar
-        // the others must clear is low from the start. (Not with profile
-        // prisms: their first-order distance would make the voxels depend
-        // on the order the pieces are tried in.)
-        constexpr std::size_t none = std::numeric_limits<std::size_t>::max();
-        bool reuse = true;
-        near.clear();
-        for (const auto& [key, k] : sub) {
-          reuse = reuse && sweep::lipschitz(*cand[k]);
-          Near& n = near.emplace_back(Near{key, cand[k], &cbox[k], Near::none, 0, Vec3::Zero(), Vec3::Zero()});
-          if (!std::isnan(seed_d[k])) {  // a convex piece's plane at the centre
-            n.bound = Near::plane;
-            n.c = seed_d[k];
-            n.grad = cgrad[k];
-          }
-        }
-        // A run whose pieces are all convex gets one bound for all of them
-        // (its planes at the centre are nearly parallel where many short
-        // pieces of one path pass a voxel); else it is never skipped whole.
-        runs.clear();
-        for (std::size_t j0 = 0; j0 < near.size(); j0 += kRun) {
-          const std::size_t j1 = std::min(j0 + kRun, near.size());
-          Run r{std::numeric_limits<double>::infinity(), 0, Vec3::Zero()};
-          bool convex = true;
-          for (std::size_t j = j0; j < j1; ++j) {
-            convex = convex && near[j].bound == Near::plane;
-            r.c = std::min(r.c, near[j].c);
-            r.grad += near[j].grad;
-          }
-          if (!convex) {
-            runs.push_back({-std::numeric_limits<double>::infinity(), 0, Vec3::Zero()});
-            continue;
-          }
-          r.grad /= static_cast<double>(j1 - j0);
-          for (std::size_t j = j0; j < j1; ++j) r.spread = std::max(r.spread, (near[j].grad - r.grad).norm());
-          runs.push_back(r);
-        }
-        std::size_t nearest = none;
-        for (int ix = bx; ix < bx + 4; ++ix)
-          for (int iy = by; iy < by + 4; ++iy)
-            for (int iz = bz; iz < bz + 4; ++iz) {
-              const int idx = (ix << 6) | (iy << 3) | iz;
-              const float v = data[idx];
-              if (v >= m.gamma) continue;
-              if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
-              const int q = ((ix - bx) << 4) | ((iy - by) << 2) | (iz - bz);
-              const Vec3 p = lmin + h * Vec3(ix, iy, iz);
-              const Vec3& y = quarter_y[q];  // p - cb
-              const double off = quarter_off[q];
-              const double need = -static_cast<double>(v);
-              if (near[0].key - off >= need) continue;
-              // Only d < -v changes the voxel; a piece farther than that (or
-              // than the nearest piece so far) cannot matter.
-              double d = std::numeric_limits<double>::infinity();
-              std::size_t best = none;
-              auto eval = [&](std::size_t j) {
-                Near& n = near[j];
-                double dj;
-                if (!reuse) {
-                  dj = sweep::distance(*n.prim, p);
-                } else if (sweep::convex_distance(*n.prim, p, &dj, &n.grad)) {
-                  n.bound = Near::plane;
-                  n.c = dj - n.grad.dot(y);
-                } else {
-                  dj = sweep::distance(*n.prim, p);
-                  n.bound = Near::cone;
-                  n.c = dj;
-                  n.at = y;
-                }
-                if (dj < d) {
-                  d = dj;
-                  best = j;
-                }
-              };
-              if (nearest != none) eval(nearest);
-              for (std::size_t j = 0; j < near.size() && d > -g; ++j) {  // at -g: clamped to air whatever the rest
-                const double thr = std::min(d, need);
-                const Near& n = near[j];
-                if (n.key - off >= thr) break;  // and every piece after it
-                if (j % kRun == 0) {
-                  const Run& r = runs[j / kRun];
-                  if (r.c + r.grad.dot(y) - r.spread * off >= thr) {
-                    j += kRun - 1;  // the whole run
-                    continue;
-                  }
-                }
-                if (j == nearest) continue;
-                // Convex pieces: the tangent plane at the last voxel; other
-                // 1-Lipschitz pieces: the last value less the step.
-                if (n.bound == Near::plane && n.c + n.grad.dot(y) >= thr) continue;
-                if (n.bound == Near::cone && n.c - (y - n.at).norm() >= thr) continue;
-                const double b2 = box_distance2(*n.box, p);
-                if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
-                eval(j);
-              }
-              if (reuse && best != none) nearest = best;
-              ++evaluated;
-              if (-d > v) {
-                const float nv = static_cast<float>(std::min(-d, g));
-                data[idx] = nv;
-                mask.set(static_cast<openvdb::Index>(idx), nv < m.gamma && nv > -m.gamma);
-              }
-            }
-      }
-      tiled[i] = air ? kAir : leaf_state(data);
-      m.voxel_evaluations.fetch_add(evaluated, std::memory_order_relaxed);
+  std::size_t first = 0, binned = 0, pairs_total = 0;  // first piece not applied; pairs since, in all
+  for (std::size_t c0 = 0; c0 < prims.size();) {
+    // Chunks sized from the pairs per piece so far, to stop near the budget.
+    const std::size_t per = c0 > 0 ? std::max<std::size_t>(1, pairs_total / c0) : std::max<std::size_t>(1, m.max_pairs / 8);
+    const std::size_t room = m.max_pairs > binned ? m.max_pairs - binned : 1;
+    const std::size_t c1 = std::min(prims.size(), c0 + std::clamp<std::size_t>(room / per, 1, kBinChunk));
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(c0, c1), bin);
+    if (interrupted()) return;  // abandoned: the caller throws
+    std::size_t chunk_pairs = 0;
+    for (std::size_t i = c0; i < c1; ++i) chunk_pairs += per_prim[i].size();
+    binned += chunk_pairs;
+    pairs_total += chunk_pairs;
+    c0 = c1;
+    if (binned < m.max_pairs && c0 < prims.size()) continue;
+    std::vector<std::uint64_t>& pairs = m.scratch_pairs;
+    pairs.clear();
+    pairs.reserve(binned);
+    for (std::size_t i = first; i < c0; ++i) {
+      pairs.insert(pairs.end(), per_prim[i].begin(), per_prim[i].end());
+      std::vector<std::uint64_t>().swap(per_prim[i]);
     }
-  });
-  for (std::size_t i = 0; i < leaves.size(); ++i) {
-    if (tiled[i] == kLeaf) continue;
-    const Coord o = leaves[i]->origin();
-    if (tiled[i] == kAir) aired.push_back(block_of(o));
-    tree.addTile(1, o, tiled[i] == kAir ? m.gamma : -m.gamma, false);
+    first = c0;
+    binned = 0;
+    apply(pairs);
+    if (interrupted()) return;
   }
-  m.refresh_occupancy(std::move(aired));
 }
 
 Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3&)>& region,
@@ -1047,20 +1097,14 @@ const Aabb& Stock::roi() const { return impl_->roi; }
 double Stock::voxel_mm() const { return impl_->h; }
 double Stock::band_mm() const { return impl_->gamma; }
 
-std::size_t Stock::leaves_in(const Aabb& b) const {
-  const Impl& m = *impl_;
-  const Aabb wb = b.expanded(m.gamma + m.h);
-  CoordBBox bb(floor_coord((wb.min - m.origin) / m.h), ceil_coord((wb.max - m.origin) / m.h));
-  bb.intersect(m.roi_index);
-  if (bb.empty()) return 0;
-  std::size_t n = 1;
-  for (int k = 0; k < 3; ++k) n *= static_cast<std::size_t>((bb.max()[k] >> 3) - (bb.min()[k] >> 3) + 1);
-  return n;
-}
-
 StockStats Stock::stats() const {
   StockStats s;
   s.voxel_evaluations = impl_->voxel_evaluations.load();
+  s.update_calls = impl_->update_calls;
+  s.bin_s = impl_->bin_s;
+  s.classify_s = impl_->classify_s;
+  s.topology_s = impl_->topology_s;
+  s.voxels_s = impl_->voxels_s;
   s.leaf_nodes = impl_->grid->tree().leafCount();
   s.active_voxels = impl_->grid->tree().activeVoxelCount();
   s.memory_bytes = impl_->grid->tree().memUsage();

@@ -22,6 +22,14 @@ struct Stock::Impl {
   openvdb::FloatGrid::Ptr grid;
   double initial_grid_volume = 0;  // coverage volume inside roi_index at build
   std::atomic<std::uint64_t> voxel_evaluations{0};  // voxels the cuts evaluated (bench figure)
+  std::size_t max_pairs = std::size_t(1) << 20;  // StockOptions::max_update_pairs
+  // Scratch of the stock update, kept between calls: fresh arrays of this
+  // size cost a page fault per 4 KB every time.
+  std::vector<std::uint64_t> scratch_pairs;
+  std::vector<double> scratch_d;
+  std::vector<Vec3> scratch_g;
+  std::size_t update_calls = 0;                      // (bench figures, written on the calling thread)
+  double bin_s = 0, classify_s = 0, topology_s = 0, voxels_s = 0;
 
   Vec3 index_to_world(const openvdb::Coord& c) const {
     return origin + h * Vec3(c.x(), c.y(), c.z());

@@ -21,6 +21,10 @@ struct StockOptions {
   /// Refuse to build a grid whose estimated memory exceeds this, bytes;
   /// 0 = 75 % of physical memory.
   std::size_t memory_limit_bytes = 0;
+  /// (leaf, piece) pairs a cut applies at a time, about 40 bytes each: a
+  /// batch whose pieces reach more leaves is applied in parts (the result
+  /// is the same), so this bounds the update's working memory.
+  std::size_t max_update_pairs = std::size_t(1) << 20;
 };
 
 /// Up to 8 x 8 x 8 voxels of the region of interest (a leaf-sized block,
@@ -43,6 +47,11 @@ struct Overlap {
 
 struct StockStats {
   std::size_t voxel_evaluations = 0;  ///< tool distances the cuts evaluated so far
+  std::size_t update_calls = 0;       ///< subtract calls that reached the grid (batches)
+  /// Seconds the cuts spent in each step so far: binning pieces by leaf
+  /// (with the sort), classifying the leaves, changing the tree's
+  /// topology, and the voxels.
+  double bin_s = 0, classify_s = 0, topology_s = 0, voxels_s = 0;
   std::size_t leaf_nodes = 0;
   std::size_t active_voxels = 0;
   std::size_t memory_bytes = 0;
@@ -128,9 +137,6 @@ public:
   const Aabb& roi() const;  ///< snapped to voxel cells
   double voxel_mm() const;
   double band_mm() const;   ///< the narrow band's half width: values are clamped to +-this
-  /// Grid leaves (8^3 voxels) a cut inside `b` can reach: an upper bound on
-  /// the work and memory a subtract of it takes.
-  std::size_t leaves_in(const Aabb& b) const;
   StockStats stats() const;
 
   struct Impl;
