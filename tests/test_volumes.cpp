@@ -6,7 +6,9 @@
 // is exact; curved faces and the edges where the CSG max() is not a true
 // distance move the surface by a small fraction of a voxel. We allow
 // 0.05 h per mm^2 of cut surface: |V - V_exact| <= 0.05 * h * A_cut.
+#include <atomic>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <tuple>
@@ -218,6 +220,49 @@ TEST(Volume, BatchedSubtractEqualsMoveByMove) {
   std::size_t differ = 0;
   for (const auto& [k, v] : a) differ += v != b[k];
   EXPECT_EQ(differ, 0u);
+}
+
+TEST(Volume, EveryVoxelInsideTheBlockIsTheNearestPiecesDepth) {
+  // Deeper than the band inside the block the stock held -gamma, so after the cuts each
+  // voxel must hold exactly clamp(-min_k d_k, -gamma, gamma), d_k the
+  // pieces' distances at its centre: whatever the update's bounds skipped,
+  // and the quarters it set to air whole, must agree with that to the bit.
+  const Aabb box{Vec3(-1, -1, -1), Vec3(2, 2, 0)};
+  stock::StockOptions so;
+  so.voxel_mm = 0.02;
+  const tool::Tool t = tool::parse_tool_spec("ball:d=0.8", "test");
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  std::vector<sweep::Sweep> moves;
+  moves.push_back(sweep::sweep_line(Vec3(-0.3, 0.2, -0.35), Vec3(1.5, 0.3, -0.3), I, t));
+  moves.push_back(sweep::sweep_line(Vec3(1.5, 0.3, -0.3), Vec3(1.4, 1.2, -0.4), I, t));
+  moves.push_back(sweep::sweep_line(Vec3(0.2, 1.4, 0.1), Vec3(0.2, 1.4, -0.45), I, t));  // plunge
+  moves.push_back(sweep::sweep_line(Vec3(0.0, -0.2, -0.1), Vec3(1.0, 1.1, -0.38), I, t));  // ramp across
+  stock::Stock s(box, box, so);
+  s.subtract(moves);
+  const double g = s.band_mm();
+  const float gf = static_cast<float>(g);
+  std::atomic<std::size_t> checked{0}, air{0}, differ{0};
+  s.for_each_roi_block([&](const stock::VoxelBlock& vb) {
+    for (int x = 0; x < vb.n[0]; ++x)
+      for (int y = 0; y < vb.n[1]; ++y)
+        for (int z = 0; z < vb.n[2]; ++z) {
+          const Vec3 p = vb.first_center + so.voxel_mm * Vec3(x, y, z);
+          const double inside = std::min((p - box.min).minCoeff(), (box.max - p).minCoeff());
+          if (inside < g + 2 * so.voxel_mm) continue;  // the block's faces' band
+          double d = std::numeric_limits<double>::infinity();
+          for (const auto& m : moves)
+            for (const auto& prim : m.prims) d = std::min(d, sweep::distance(prim, p));
+          const float want = std::max(-gf, static_cast<float>(std::min(-d, g)));
+          const float got = vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z];
+          ++checked;
+          air += want == gf;
+          differ += got != want;
+        }
+  });
+  EXPECT_GT(checked.load(), 200000u);
+  EXPECT_GT(air.load(), 40000u);  // the cuts' insides, where quarters are set to air whole
+  EXPECT_GT(s.stats().voxels_aired, 10000u);
+  EXPECT_EQ(differ.load(), 0u);
 }
 
 // Every voxel of the ROI, by block.

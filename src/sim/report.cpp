@@ -93,6 +93,7 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   j["contacts"] = cs;
   j["active_voxels"] = st.active_voxels;
   j["voxel_evaluations"] = st.voxel_evaluations;
+  j["voxels_aired_by_quarter"] = st.voxels_aired;
   j["stock_update_batches"] = st.update_calls;
   j["leaf_nodes"] = st.leaf_nodes;
   j["idle_leaves"] = st.idle_leaves;

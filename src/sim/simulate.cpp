@@ -445,6 +445,7 @@ SimResult simulate(const SimOptions& opt) {
   } catch (const StopAtContact&) {
     res.stopped_at_contact = true;
   }
+  if (res.stock) res.stock->release_scratch();
   res.contacts = checker.contacts();
   res.max_laser_error_mm = planner.max_laser_error_mm();
   if (opt.job.profile) res.profile = measure_profile(*res.stock, res.stock_box, *opt.job.profile);

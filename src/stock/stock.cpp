@@ -373,6 +373,13 @@ void Stock::subtract(const std::vector<sweep::Sweep>& batch) {
   subtract_prims(prims);
 }
 
+void Stock::release_scratch() {
+  Impl& m = *impl_;
+  std::vector<std::uint64_t>().swap(m.scratch_pairs);
+  std::vector<double>().swap(m.scratch_d);
+  std::vector<Vec3>().swap(m.scratch_g);
+}
+
 namespace {
 
 int bits_for(std::uint64_t n) {  // bits to hold 0 .. n - 1
@@ -419,8 +426,10 @@ double bounded_key(double d, const sweep::Primitive& p) {
 // the piece's distance instead of listed whole.
 constexpr std::int64_t kListLeaves = 4096;
 
-// Pieces binned per parallel chunk, at most.
-constexpr std::size_t kBinChunk = 256;
+// Pieces binned per parallel chunk, at most: a chunk is sized from the
+// pairs per piece so far, so large pieces after small ones (roughing at
+// 1 um: ~450k pairs each) bin at most this many before the budget is seen.
+constexpr std::size_t kBinChunk = 64;
 
 }  // namespace
 
@@ -633,7 +642,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         float* data = leaf->buffer().data();
         auto& mask = leaf->getValueMask();
         bool air = true;
-        std::uint64_t evaluated = 0;
+        std::uint64_t evaluated = 0, quarter_aired = 0;
         // Each 4 x 4 x 4 quarter of the leaf on its own: the pieces' distances
         // at its centre bound its voxels' more tightly than the leaf's.
         for (int sb = 0; sb < 8; ++sb) {
@@ -671,6 +680,25 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           }
           if (sub.empty()) continue;
           std::sort(sub.begin(), sub.end());
+          // A quarter deeper inside one 1-Lipschitz piece than the band and
+          // its half diagonal: each voxel's distance is at most -g, so each is
+          // clamped to air whatever the other pieces (what the voxel loop
+          // would write, without a distance per voxel). The old surface's
+          // band under a cut is mostly such quarters.
+          if (const sweep::Primitive& p0 = *cand[sub[0].second];
+              sweep::lipschitz(p0) && sweep::distance(p0, cb) + hd_sub <= -g - 1e-6 * h) {
+            for (int ix = bx; ix < bx + 4; ++ix)
+              for (int iy = by; iy < by + 4; ++iy)
+                for (int iz = bz; iz < bz + 4; ++iz) {
+                  const int idx = (ix << 6) | (iy << 3) | iz;
+                  if (data[idx] >= m.gamma) continue;
+                  if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
+                  data[idx] = m.gamma;
+                  mask.setOff(static_cast<openvdb::Index>(idx));
+                  ++quarter_aired;
+                }
+            continue;
+          }
           // Where every piece's distance is 1-Lipschitz, each piece's value at
           // the voxel it was last evaluated at bounds it here too, less the
           // distance between the two (far tighter than the quarter centre's),
@@ -780,6 +808,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         }
         tiled[i] = air ? kAir : leaf_state(data);
         m.voxel_evaluations.fetch_add(evaluated, std::memory_order_relaxed);
+        m.voxels_aired.fetch_add(quarter_aired, std::memory_order_relaxed);
       }
     });
     lap(m.voxels_s);
@@ -1100,6 +1129,7 @@ double Stock::band_mm() const { return impl_->gamma; }
 StockStats Stock::stats() const {
   StockStats s;
   s.voxel_evaluations = impl_->voxel_evaluations.load();
+  s.voxels_aired = impl_->voxels_aired.load();
   s.update_calls = impl_->update_calls;
   s.bin_s = impl_->bin_s;
   s.classify_s = impl_->classify_s;

@@ -47,6 +47,9 @@ struct Overlap {
 
 struct StockStats {
   std::size_t voxel_evaluations = 0;  ///< tool distances the cuts evaluated so far
+  /// Voxels set to air with no distance of their own: their 4^3 quarter
+  /// lies deeper than the band inside one piece.
+  std::size_t voxels_aired = 0;
   std::size_t update_calls = 0;       ///< subtract calls that reached the grid (batches)
   /// Seconds the cuts spent in each step so far: binning pieces by leaf
   /// (with the sort), classifying the leaves, changing the tree's
@@ -81,6 +84,9 @@ public:
   /// Removes several sweeps at once (the order does not matter: the union
   /// is removed). Each leaf is visited once for the whole batch.
   void subtract(const std::vector<sweep::Sweep>& batch);
+  /// Frees the working memory cuts keep between calls (up to some 40 bytes
+  /// per StockOptions::max_update_pairs): call after the last cut.
+  void release_scratch();
 
   /// Stock volume now, mm^3: the analytic box minus what the grid lost.
   double volume_mm3() const;
