@@ -533,17 +533,20 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     std::vector<std::size_t> leaf_group;
     std::vector<Coord> aired;  // blocks that may now hold only air
     auto block_of = [](const Coord& o) { return Coord(o.x() & ~(kMid - 1), o.y() & ~(kMid - 1), o.z() & ~(kMid - 1)); };
+    // The leaves come in key order, neighbours mostly: an accessor keeps
+    // the path down from the root between them.
+    openvdb::tree::ValueAccessor<openvdb::FloatTree> tacc(tree);
     for (std::size_t gi = 0; gi < ng; ++gi) {
       if (action[gi] == skip) continue;
       const Coord o = keys.origin(pairs[group[gi]]);
       if (action[gi] == to_air) {
-        if (tree.probeLeaf(o) || tree.getValue(o) <= 0) {
-          tree.addTile(1, o, m.gamma, false);
+        if (tacc.probeLeaf(o) || tacc.getValue(o) <= 0) {
+          tacc.addTile(1, o, m.gamma, false);
           aired.push_back(block_of(o));
         }
         continue;
       }
-      leaves.push_back(tree.touchLeaf(o));
+      leaves.push_back(tacc.touchLeaf(o));
       leaf_group.push_back(gi);
     }
     if (leaves.empty()) {
@@ -812,11 +815,12 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       }
     });
     lap(m.voxels_s);
+    tacc.clear();  // (the voxel step changed no topology; tiles from here)
     for (std::size_t i = 0; i < leaves.size(); ++i) {
       if (tiled[i] == kLeaf) continue;
       const Coord o = leaves[i]->origin();
       if (tiled[i] == kAir) aired.push_back(block_of(o));
-      tree.addTile(1, o, tiled[i] == kAir ? m.gamma : -m.gamma, false);
+      tacc.addTile(1, o, tiled[i] == kAir ? m.gamma : -m.gamma, false);
     }
     m.refresh_occupancy(std::move(aired));
     lap(m.topology_s);
