@@ -186,6 +186,21 @@ TEST(Volume, EveryLeafHoldsTheBand) {
   EXPECT_EQ(s.stats().idle_leaves, 0u) << "after the cut";
 }
 
+// Every voxel of the ROI, by block.
+std::map<std::tuple<double, double, double>, std::vector<float>> voxels_of(const stock::Stock& s) {
+  std::mutex mu;
+  std::map<std::tuple<double, double, double>, std::vector<float>> out;
+  s.for_each_roi_block([&](const stock::VoxelBlock& vb) {
+    std::vector<float> v;
+    for (int x = 0; x < vb.n[0]; ++x)
+      for (int y = 0; y < vb.n[1]; ++y)
+        for (int z = 0; z < vb.n[2]; ++z) v.push_back(vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z]);
+    std::lock_guard<std::mutex> lock(mu);
+    out[{vb.first_center.x(), vb.first_center.y(), vb.first_center.z()}] = std::move(v);
+  });
+  return out;
+}
+
 TEST(Volume, BatchedSubtractEqualsMoveByMove) {
   const Aabb box{Vec3(-1, -1, -1), Vec3(2, 2, 0)};
   stock::StockOptions so;
@@ -202,23 +217,10 @@ TEST(Volume, BatchedSubtractEqualsMoveByMove) {
   batch.subtract(moves);
   EXPECT_GT(one.removed_volume_mm3(), 0.05);
   EXPECT_EQ(one.removed_volume_mm3(), batch.removed_volume_mm3());
-  std::mutex mu;
-  std::map<std::tuple<double, double, double>, std::vector<float>> a, b;
-  auto collect = [&](auto& out) {
-    return [&](const stock::VoxelBlock& vb) {
-      std::vector<float> v;
-      for (int x = 0; x < vb.n[0]; ++x)
-        for (int y = 0; y < vb.n[1]; ++y)
-          for (int z = 0; z < vb.n[2]; ++z) v.push_back(vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z]);
-      std::lock_guard<std::mutex> lock(mu);
-      out[{vb.first_center.x(), vb.first_center.y(), vb.first_center.z()}] = std::move(v);
-    };
-  };
-  one.for_each_roi_block(collect(a));
-  batch.for_each_roi_block(collect(b));
+  const auto a = voxels_of(one), b = voxels_of(batch);
   ASSERT_EQ(a.size(), b.size());
   std::size_t differ = 0;
-  for (const auto& [k, v] : a) differ += v != b[k];
+  for (const auto& [k, v] : a) differ += v != b.at(k);
   EXPECT_EQ(differ, 0u);
 }
 
@@ -263,21 +265,6 @@ TEST(Volume, EveryVoxelInsideTheBlockIsTheNearestPiecesDepth) {
   EXPECT_GT(air.load(), 40000u);  // the cuts' insides, where quarters are set to air whole
   EXPECT_GT(s.stats().voxels_aired, 10000u);
   EXPECT_EQ(differ.load(), 0u);
-}
-
-// Every voxel of the ROI, by block.
-std::map<std::tuple<double, double, double>, std::vector<float>> voxels_of(const stock::Stock& s) {
-  std::mutex mu;
-  std::map<std::tuple<double, double, double>, std::vector<float>> out;
-  s.for_each_roi_block([&](const stock::VoxelBlock& vb) {
-    std::vector<float> v;
-    for (int x = 0; x < vb.n[0]; ++x)
-      for (int y = 0; y < vb.n[1]; ++y)
-        for (int z = 0; z < vb.n[2]; ++z) v.push_back(vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z]);
-    std::lock_guard<std::mutex> lock(mu);
-    out[{vb.first_center.x(), vb.first_center.y(), vb.first_center.z()}] = std::move(v);
-  });
-  return out;
 }
 
 TEST(Volume, BatchAppliedInPartsEqualsWhole) {
