@@ -289,8 +289,8 @@ TEST(Volume, BatchAppliedInPartsEqualsWhole) {
   whole.subtract(moves);
   parts.subtract(moves);
   for (const auto& m : moves) one.subtract(m);
-  EXPECT_EQ(whole.stats().update_calls, 1u);
-  EXPECT_GE(parts.stats().update_calls, 5u);  // the budget really split it (8 pieces, then one by one)
+  EXPECT_EQ(whole.stats().grid_updates, 1u);
+  EXPECT_GE(parts.stats().grid_updates, 5u);  // the budget really split it (8 pieces, then one by one)
   EXPECT_GT(whole.removed_volume_mm3(), 0.2);
   EXPECT_EQ(whole.removed_volume_mm3(), parts.removed_volume_mm3());
   const auto a = voxels_of(whole), b = voxels_of(parts), c = voxels_of(one);

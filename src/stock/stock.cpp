@@ -466,7 +466,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       lap(m.bin_s);
       return;
     }
-    ++m.update_calls;
+    ++m.grid_updates;
     tbb::parallel_sort(pairs.begin(), pairs.end());
     std::vector<std::size_t> group;  // start of each leaf's run of keys
     for (std::size_t i = 0; i < pairs.size(); ++i)
@@ -1134,7 +1134,7 @@ StockStats Stock::stats() const {
   StockStats s;
   s.voxel_evaluations = impl_->voxel_evaluations.load();
   s.voxels_aired = impl_->voxels_aired.load();
-  s.update_calls = impl_->update_calls;
+  s.grid_updates = impl_->grid_updates;
   s.bin_s = impl_->bin_s;
   s.classify_s = impl_->classify_s;
   s.topology_s = impl_->topology_s;

@@ -29,7 +29,7 @@ struct Stock::Impl {
   std::vector<std::uint64_t> scratch_pairs;
   std::vector<double> scratch_d;
   std::vector<Vec3> scratch_g;
-  std::size_t update_calls = 0;                      // (bench figures, written on the calling thread)
+  std::size_t grid_updates = 0;                      // (bench figures, written on the calling thread)
   double bin_s = 0, classify_s = 0, topology_s = 0, voxels_s = 0;
 
   Vec3 index_to_world(const openvdb::Coord& c) const {

@@ -50,7 +50,9 @@ struct StockStats {
   /// Voxels set to air with no distance of their own: their 4^3 quarter
   /// lies deeper than the band inside one piece.
   std::size_t voxels_aired = 0;
-  std::size_t update_calls = 0;       ///< subtract calls that reached the grid (batches)
+  /// Updates of the grid: one per batch, more where a batch passed
+  /// StockOptions::max_update_pairs and was applied in parts.
+  std::size_t grid_updates = 0;
   /// Seconds the cuts spent in each step so far: binning pieces by leaf
   /// (with the sort), classifying the leaves, changing the tree's
   /// topology, and the voxels.
