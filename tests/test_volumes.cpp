@@ -305,5 +305,64 @@ TEST(Volume, BatchAppliedInPartsEqualsWhole) {
   EXPECT_EQ(differ_one, 0u);
 }
 
+TEST(Volume, VToolPlaningInPartsEqualsWholeAndMoveByMove) {
+  // A V tool planing along X, lowering and lifting on the way (the
+  // snowflake's moves, in the plane of its cutting direction and axis):
+  // its prisms count as 1-Lipschitz, so the update culls with them as
+  // with a ball end. The voxels must not depend on how the moves are
+  // grouped, to the bit; lines 30 um apart leave cusps between them.
+  const Aabb box{Vec3(-0.05, -0.1, -0.05), Vec3(0.25, 0.1, 0)};
+  const tool::Tool t = tool::parse_tool_spec("vtool:angle=90,h=0.04,body=0.1", "test");
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  std::vector<sweep::Sweep> moves;
+  for (int line = 0; line < 4; ++line) {
+    const double y = -0.045 + 0.03 * line;
+    for (int k = 0; k < 20; ++k) {
+      const double x0 = 0.01 * k, x1 = x0 + 0.01;
+      auto z = [](double x) { return -0.012 + 0.008 * std::sin(20 * x); };
+      moves.push_back(sweep::sweep_line(Vec3(x0, y, z(x0)), Vec3(x1, y, z(x1)), I, t));
+    }
+  }
+  for (const auto& m : moves)
+    for (const auto& p : m.prims) ASSERT_TRUE(sweep::lipschitz(p));
+  stock::StockOptions whole_opt;
+  whole_opt.voxel_mm = 0.001;
+  stock::StockOptions parts_opt = whole_opt;
+  parts_opt.max_update_pairs = 200;
+  stock::Stock whole(box, box, whole_opt), parts(box, box, parts_opt), one(box, box, whole_opt);
+  whole.subtract(moves);
+  parts.subtract(moves);
+  for (const auto& m : moves) one.subtract(m);
+  EXPECT_GE(parts.stats().grid_updates, 5u);
+  // The closed form, integrated: across Y the union of four 90 deg V
+  // grooves, each as deep as the tip (and half as wide as twice that).
+  double expect = 0;
+  constexpr int kNx = 2000, kNy = 2000;
+  for (int i = 0; i < kNx; ++i) {
+    const double x = 0.2 * (i + 0.5) / kNx, depth = 0.012 - 0.008 * std::sin(20 * x);
+    for (int j = 0; j < kNy; ++j) {
+      const double y = -0.1 + 0.2 * (j + 0.5) / kNy;
+      double d = 0;
+      for (int line = 0; line < 4; ++line) d = std::max(d, depth - std::fabs(y - (-0.045 + 0.03 * line)));
+      expect += d * (0.2 / kNx) * (0.2 / kNy);
+    }
+  }
+  // Measured 4.4 % under at 1 um voxels and 2.1 % at 0.5 um: the coverage
+  // integral's first-order bias on sharp V bottoms and ridges (about 0.12
+  // of a voxel over the grooves' faces), halving with the voxel.
+  EXPECT_NEAR(whole.removed_volume_mm3(), expect, 0.06 * expect);
+  EXPECT_LT(whole.removed_volume_mm3(), expect);
+  const auto a = voxels_of(whole), b = voxels_of(parts), c = voxels_of(one);
+  ASSERT_EQ(a.size(), b.size());
+  ASSERT_EQ(a.size(), c.size());
+  std::size_t differ_parts = 0, differ_one = 0;
+  for (const auto& [k, v] : a) {
+    differ_parts += v != b.at(k);
+    differ_one += v != c.at(k);
+  }
+  EXPECT_EQ(differ_parts, 0u);
+  EXPECT_EQ(differ_one, 0u);
+}
+
 }  // namespace
 }  // namespace cutsim::test

@@ -73,9 +73,10 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
       const tool::Region& rg = regions[i];
       at[i] = pose * rg.frame;
       const Pose before = prev * rg.frame;
-      Aabb b = sweep::world_box(tool::shape_bounds(rg.shape), at[i].linear(), at[i].translation());
+      // Only the part of a V tool's body below the top of the material counts.
+      Aabb b = sweep::world_box_within(rg.shape, at[i].linear(), at[i].translation(), reach);
       if (swept(rg.shape)) {
-        b.extend(sweep::world_box(tool::shape_bounds(rg.shape), before.linear(), before.translation()));
+        b.extend(sweep::world_box_within(rg.shape, before.linear(), before.translation(), reach));
         if (b.expanded(0.1 * b.size().norm()).overlaps(reach)) {
           sweeps[i] =
               straight ? sweep::sweep_line(before.translation(), at[i].translation(), at[i].linear(), rg.shape)

@@ -344,7 +344,17 @@ const Aabb& bounds(const Primitive& p) {
 
 bool lipschitz(const Primitive& p) {
   if (const auto* lp = std::get_if<LinearPrim>(&p)) return lp->kind != LinearPrim::Case::general;
-  return !std::holds_alternative<ProfilePrim>(p);
+  if (const auto* pp = std::get_if<ProfilePrim>(&p)) {
+    // A pointed edge (a V tool) moved in the plane of its cutting direction
+    // and its axis: the sides stay planes leaning alike, and the distance
+    // is the largest of their plane distances inside. A sideways component
+    // leans the two sides differently (a jump inside, on the bisector); a
+    // round nose leans its tangent planes differently too.
+    const Vec3& d = pp->d_local;
+    return pp->edge.nose_radius == 0 && std::fabs(d.x()) > 1e-9 * std::max(d.norm(), 1e-12) &&
+           std::fabs(d.y()) <= 1e-12 * d.norm();
+  }
+  return true;
 }
 
 Aabb world_box(const Aabb& local, const Eigen::Matrix3d& R, const Vec3& tip) {
@@ -415,6 +425,40 @@ Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, c
   append_line(s, tip0, tip1, R, shape);
   for (const Primitive& p : s.prims) s.bounds.extend(bounds(p));
   return s;
+}
+
+namespace {
+// The highest point of `reach` along the tool axis w, above `tip`.
+double top_within(const Vec3& w, const Vec3& tip, const Aabb& reach) {
+  double top = 0;
+  for (int k = 0; k < 3; ++k) top += std::max(w[k] * (reach.min[k] - tip[k]), w[k] * (reach.max[k] - tip[k]));
+  return top;
+}
+}  // namespace
+
+Aabb world_box_within(const tool::Shape& shape, const Eigen::Matrix3d& R, const Vec3& tip, const Aabb& reach) {
+  return world_box(tool::shape_bounds_below(shape, top_within(R.col(2), tip, reach)), R, tip);
+}
+
+void clip_bounds(Sweep& s, const Aabb& reach) {
+  if (reach.empty()) return;
+  Aabb all;
+  for (Primitive& p : s.prims) {
+    Aabb& b = std::visit([](auto& q) -> Aabb& { return q.bounds; }, p);
+    if (auto* pp = std::get_if<ProfilePrim>(&p)) {
+      // One box for both ends, of the part below the higher of their tops:
+      // the cross-sections between them are that box moved along the move.
+      const Eigen::Matrix3d Rl = pp->to_local.transpose();
+      const Vec3 tip1 = pp->origin + Rl * pp->d_local;
+      const double top = std::max(top_within(Rl.col(2), pp->origin, reach), top_within(Rl.col(2), tip1, reach));
+      const Aabb local = tool::shape_bounds_below(tool::Shape(pp->edge), top);
+      b = world_box(local, Rl, pp->origin);
+      b.extend(world_box(local, Rl, tip1));
+    }
+    b = b.intersected(reach);
+    if (!b.empty()) all.extend(b.min), all.extend(b.max);
+  }
+  s.bounds = all.empty() ? s.bounds.intersected(reach) : all;
 }
 
 Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, const tool::Tool& tool) {

@@ -159,6 +159,20 @@ Aabb shape_bounds(const Shape& s) {
   }, s);
 }
 
+Aabb shape_bounds_below(const Shape& s, double top) {
+  if (const auto* e = std::get_if<EdgeProfile>(&s); e && top < e->height) {
+    EdgeProfile low = *e;
+    low.height = std::max(top, 0.0);
+    return shape_bounds(low);
+  }
+  if (const auto* f = std::get_if<FlankBody>(&s); f && top < f->edge.height) {
+    FlankBody low = *f;
+    low.edge.height = std::max(top, 0.0);
+    return shape_bounds(low);
+  }
+  return shape_bounds(s);
+}
+
 namespace {
 EdgeProfile edge_of(const Tool& t) {
   EdgeProfile e;

@@ -40,7 +40,8 @@ public:
   PlannedMove plan(const motion::Move& m);
   /// The tool pose (tip at origin, axis +Z) at parameter s of a planned move.
   Pose pose_at(const motion::Move& m, const PlannedMove& p, double s) const;
-  /// The cutting envelope's swept region over the move.
+  /// The cutting envelope's swept region over the move. With an `interest`
+  /// box, the pieces' boxes are cut to it (sweep::clip_bounds).
   sweep::Sweep sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const;
   /// The swept region over the part [s0, s1] of the move (a fly-cutter's
   /// revolutions that fall in it; other tools within the sweep tolerance).
@@ -55,6 +56,9 @@ public:
   void set_file(std::string f) { file_ = std::move(f); }
 
 private:
+  sweep::Sweep sweep_(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const;
+  sweep::Sweep sweep_part_(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool, double s0,
+                           double s1) const;
   machine::JointValues joints_at(const motion::Move& m, const PlannedMove& p, double s) const;
   machine::JointValues with_laser_error(machine::JointValues q, double t) const;
 

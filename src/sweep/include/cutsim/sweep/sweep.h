@@ -94,9 +94,11 @@ const Aabb& bounds(const Primitive& p);
 /// nearby on both sides of the surface. Holds where it is the distance to
 /// a convex core less a radius, or the exact distance of a capped prism or
 /// a torus: lines that are vertical, horizontal or of a zero-radius core
-/// (ball ends), G17 arcs, fly-cutter tori. Not for the general line (an
-/// approximate minimisation) or a profile prism (a first-order estimate
-/// when sheared).
+/// (ball ends), G17 arcs, fly-cutter tori, and a pointed (V) edge moved in
+/// the plane of its cutting direction and axis (planing, lifting and
+/// lowering: its sides stay planes). Not for the general line (an
+/// approximate minimisation) or other profile prisms (a first-order
+/// estimate when sheared sideways or with a round nose).
 bool lipschitz(const Primitive& p);
 /// Where the piece's distance is convex in x (a ball end's line: the
 /// distance to the parallelogram or segment its core sweeps less the
@@ -145,6 +147,22 @@ Sweep sweep_line(const Vec3& tip0, const Vec3& tip1, const Eigen::Matrix3d& R, c
 /// "top" is its farthest point inside the region.
 Sweep sweep_poses(const std::function<Pose(double)>& pose_at, const tool::Shape& shape, double tolerance_mm,
                   int min_pieces = 4, const Aabb* region = nullptr);
+
+/// The box of the part of `shape`, placed at `tip` with orientation `R`,
+/// that is not higher along the tool axis than the top of `reach`
+/// (tool::shape_bounds_below): it holds every point of the shape within `reach`.
+Aabb world_box_within(const tool::Shape& shape, const Eigen::Matrix3d& R, const Vec3& tip, const Aabb& reach);
+
+/// Tightens the pieces' boxes (and the sweep's) to what lies within `reach`:
+/// a box may then hold less than the whole piece, but every point of the
+/// piece within `reach`. For the one who knows nothing outside `reach`
+/// matters (the stock: its box grown by more than its band): binning,
+/// culling and "is anything near" tests then see a V tool's 10 um of cut,
+/// not its 0.1 mm edge. A profile prism's box is that of the part of its
+/// profile not higher along the tool axis than the top of `reach`; other
+/// pieces' boxes are cut to `reach`. `Sweep::distance` stays exact for
+/// points within `reach` up to `reach`'s distance from their outside.
+void clip_bounds(Sweep& s, const Aabb& reach);
 
 /// Fly-cutter revolutions: the swing torus at each pose.
 Sweep sweep_tori(const std::vector<Pose>& poses, const tool::SwingTorus& torus);
