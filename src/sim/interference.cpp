@@ -26,7 +26,7 @@ double InterferenceChecker::pose_spacing(const tool::Tool& t, double voxel_mm) {
 }
 
 bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
-                                const std::function<bool()>& flush_pending) {
+                                const PendingCuts* pending) {
   const bool rapid = m.kind == motion::MotionKind::rapid;
   std::vector<tool::Region> regions = tool::contact_regions(tool);
   const tool::Shape cut = tool::cutting_shape(tool);
@@ -62,7 +62,6 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     const double s = static_cast<double>(k) / n;
     const double s_prev = static_cast<double>(k - 1) / n;
     const Pose pose = planner_.pose_at(m, pm, s);
-    const Vec3 tip = pose.translation();
     ++pose_index_;
     // Skip poses whose regions all miss the material's reach.
     bool any = false;
@@ -108,9 +107,11 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
       };
       stock::Overlap ov = overlap(so_far.prims.empty() ? nullptr : std::function<double(const Vec3&, double)>(so_far_d));
       // The batch's pending cuts only take material away: without a
-      // contact on the stock as it is, there is none after them either.
-      // With one, the pending cuts are subtracted and the pose tested again.
-      if (ov.depth_mm > tol_ && flush_pending && flush_pending())
+      // contact on the stock as it is, there is none after them either, and
+      // where they leave the deepest voxel as it is, that stays the deepest
+      // (and the first of its depth in the scan's order). Else they are
+      // subtracted and the pose tested again.
+      if (ov.depth_mm > tol_ && pending && pending->change(ov.where, ov.stock_value) && pending->flush())
         ov = overlap(so_far.prims.empty() ? nullptr : std::function<double(const Vec3&, double)>(so_far_d));
       if (ov.depth_mm <= tol_) continue;
       touched = true;
@@ -141,6 +142,20 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     }
   }
   return touched;
+}
+
+bool cuts_change_voxel(const std::vector<sweep::Sweep>& cuts, const stock::Stock& stock, const Vec3& p, double v) {
+  // The update writes -d where d < -v, evaluating a piece at the voxels of
+  // every leaf its box, grown by the band, reaches: a piece whose box,
+  // grown by that and a leaf, misses the voxel is never asked there.
+  const double reach = stock.band_mm() + 8 * stock.voxel_mm();
+  const double below = -v + 1e-6 * stock.voxel_mm();  // rounding in the voxel's position
+  for (const sweep::Sweep& sw : cuts) {
+    if (!sw.bounds.expanded(reach).contains(p)) continue;
+    for (const sweep::Primitive& piece : sw.prims)
+      if (sweep::bounds(piece).expanded(reach).contains(p) && sweep::distance(piece, p) < below) return true;
+  }
+  return false;
 }
 
 std::string format_contact(const Contact& c, const std::string& program) {

@@ -404,6 +404,13 @@ SimResult simulate(const SimOptions& opt) {
     pending.clear();
     pending_prims = 0;
   };
+  InterferenceChecker::PendingCuts held;
+  held.change = [&](const Vec3& p, double v) { return cuts_change_voxel(pending, *res.stock, p, v); };
+  held.flush = [&] {
+    const bool any = !pending.empty();
+    flush();
+    return any;
+  };
   try {
   stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
     const auto t0 = Clock::now();
@@ -412,11 +419,7 @@ SimResult simulate(const SimOptions& opt) {
     sweep::Sweep sw = planner.sweep(m, pm, t);
     const auto t1 = Clock::now();
     flush_s = 0;
-    const bool touched = checker.check(m, pm, t, [&] {
-      const bool any = !pending.empty();
-      flush();
-      return any;
-    });
+    const bool touched = checker.check(m, pm, t, &held);
     res.timing.plan_sweep_s += std::chrono::duration<double>(t1 - t0).count();
     res.timing.contact_check_s += seconds_since(t1) - flush_s;
     if (!sw.prims.empty() && sw.bounds.overlaps(res.stock->roi().expanded(res.stock->band_mm() + res.voxel_mm))) {

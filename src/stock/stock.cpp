@@ -1004,6 +1004,8 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
                   if (depth > floor) {
                     local.depth_mm = depth;
                     local.where = p;
+                    local.stock_value = data ? static_cast<double>(data[((x - o.x()) << 6) | ((y - o.y()) << 3) | (z - o.z())])
+                                             : static_cast<double>(tile);
                     local_block = i;
                     floor = depth;
                   }

@@ -30,15 +30,25 @@ struct Contact {
 /// material still there at that pose: the stock before the move less what
 /// the cutting part swept from the move's start to that pose (on a rapid,
 /// nothing is cut first). The caller may hold cuts back to subtract them in
-/// a batch: on a touch, `flush_pending` is called to subtract them (it
-/// returns true when there were any) and the pose is tested again.
+/// a batch (PendingCuts): a touch found on the stock without them stands
+/// as found when they would leave its deepest voxel as it is (they only
+/// take material away, so nowhere else can get deeper than it); else they
+/// are subtracted and the pose is tested again.
 class InterferenceChecker {
 public:
+  /// Cuts the caller holds back from the stock.
+  struct PendingCuts {
+    /// Would they change the stock's voxel at `p`, whose value is `v`?
+    /// (May say yes when unsure; must not say no when they would.)
+    std::function<bool(const Vec3& p, double v)> change;
+    /// Subtracts them; true when there were any.
+    std::function<bool()> flush;
+  };
   InterferenceChecker(const stock::Stock& stock, const Planner& planner, double tolerance_mm,
                       double sweep_tolerance_mm);
   /// Returns true when this move touched.
   bool check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
-             const std::function<bool()>& flush_pending = nullptr);
+             const PendingCuts* pending = nullptr);
   const std::vector<Contact>& contacts() const { return contacts_; }
   /// Poses between tested ones along a move, mm (half the smallest region).
   static double pose_spacing(const tool::Tool& t, double voxel_mm);
@@ -50,6 +60,12 @@ private:
   long pose_index_ = 0;
   std::vector<Contact> contacts_;
 };
+
+/// Would subtracting `cuts` from `stock` change its voxel at `p`, whose
+/// value is `v`? Never no where they would (what PendingCuts::change must
+/// answer for cuts held back in a batch); yes only where a piece the update
+/// would evaluate there comes nearer than -v.
+bool cuts_change_voxel(const std::vector<sweep::Sweep>& cuts, const stock::Stock& stock, const Vec3& p, double v);
 
 /// `prog.nc:1234: clearance-face contact 0.8 um deep at (x, y, z): G1 X...`
 std::string format_contact(const Contact& c, const std::string& program);

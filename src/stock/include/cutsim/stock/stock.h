@@ -43,6 +43,9 @@ struct Overlap {
   double depth_mm = 0;        ///< deepest overlap found (0: none above the threshold)
   Vec3 where = Vec3::Zero();  ///< voxel centre of the deepest overlap, workpiece frame
   bool at_least = false;      ///< the depth reached the band's half width: the true depth is at least this
+  /// The stock's own value at `where` (before what `removed` takes): cuts
+  /// that leave this voxel as it is leave the deepest overlap as it is.
+  double stock_value = 0;
 };
 
 struct StockStats {
