@@ -1,6 +1,7 @@
 // Comparison with the target: overcut and undercut against closed forms,
 // their positions, a mesh with a hole refused, the coloured glb read back.
 #include <cmath>
+#include <random>
 
 #include <nlohmann/json.hpp>
 #include <tiny_gltf.h>
@@ -157,6 +158,66 @@ TEST(Compare, SlotCutTooDeepOverHalfItsLengthIsOvercutOfTheClosedForm) {
 }
 
 // Large regions are drawn on a coarser grid; the volumes stay the voxels'.
+// A UV sphere of radius 1: `rings` bands of `segs` quads, closed, outward.
+TriMesh uv_sphere(int rings, int segs) {
+  TriMesh m;
+  m.positions.emplace_back(0, 0, 1);
+  for (int i = 1; i < rings; ++i) {
+    const double th = kPi * i / rings;
+    for (int j = 0; j < segs; ++j) {
+      const double ph = 2 * kPi * j / segs;
+      m.positions.emplace_back(std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th));
+    }
+  }
+  m.positions.emplace_back(0, 0, -1);
+  const auto ring = [&](int i, int j) { return static_cast<std::uint32_t>(1 + (i - 1) * segs + (j % segs)); };
+  const auto south = static_cast<std::uint32_t>(m.positions.size() - 1);
+  for (int j = 0; j < segs; ++j) {
+    m.triangles.push_back({0, ring(1, j), ring(1, j + 1)});
+    m.triangles.push_back({south, ring(rings - 1, j + 1), ring(rings - 1, j)});
+    for (int i = 1; i + 1 < rings; ++i) {
+      m.triangles.push_back({ring(i, j), ring(i + 1, j), ring(i + 1, j + 1)});
+      m.triangles.push_back({ring(i, j), ring(i + 1, j + 1), ring(i, j + 1)});
+    }
+  }
+  if (m.signed_volume() < 0)
+    for (auto& t : m.triangles) std::swap(t[1], t[2]);
+  return m;
+}
+
+// The comparison searches the mesh once per block and tries only the
+// triangles near it for each voxel's query: the answers must be the whole
+// mesh's, where the near set's ball holds the query's.
+TEST(Compare, NearTrianglesAnswerAsTheWholeMesh) {
+  const compare::Target target(uv_sphere(96, 192));
+  const std::size_t all = target.mesh().triangles.size();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<unsigned> near;
+  std::size_t found = 0, largest = 0;
+  for (int k = 0; k < 20000; ++k) {
+    Vec3 dir(u(rng), u(rng), u(rng));
+    if (dir.norm() < 0.1) continue;
+    // Balls of several facets (each about 0.03 across), so that a set
+    // missing the far ones would show.
+    const Vec3 p = dir.normalized() * (1 + 0.1 * u(rng));
+    const double r = 0.02 + 0.05 * (u(rng) + 1);
+    const Vec3 c = p + 0.1 * Vec3(u(rng), u(rng), u(rng));
+    target.triangles_near(c, (p - c).norm() + r, near);
+    largest = std::max(largest, near.size());
+    const auto whole = target.signed_distance_if_within(p, r);
+    const auto local = target.signed_distance_if_within(p, r, near);
+    ASSERT_EQ(whole.has_value(), local.has_value()) << "at (" << p.transpose() << "), r " << r;
+    if (!whole) continue;
+    ++found;
+    ASSERT_EQ(*local, *whole) << "at (" << p.transpose() << "), r " << r;
+    // The distance to a sphere of 192 x 96 facets: within its sagitta.
+    EXPECT_NEAR(*whole, p.norm() - 1, 1e-3);
+  }
+  EXPECT_GT(found, 10000u);
+  EXPECT_LT(largest, all / 10) << "the near set should be a small part of the mesh";
+}
+
 TEST(Compare, CoarseRegionMeshesKeepTheVolumesAndCoverTheFineRegion) {
   TempDir dir;
   auto r = run_program(dir, "G0 X-2 Y0 Z1\nG1 Z-0.105 F100\nG1 X3\nG1 Z-0.1\nG1 X8\nG0 Z1\n", "flat:d=2",

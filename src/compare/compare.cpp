@@ -206,15 +206,31 @@ void block_target_distances(const stock::VoxelBlock& b, const Vec3& centre, doub
   // within hq + 1.5h of its centre, none is within 1.5h of its voxels; with
   // |d| >= hq + h there, all its voxels are saturated.
   const double hq = std::sqrt(3.0) * 1.5 * h;
+  // Every query below is within hq + 1.5h of a quarter's centre, or 1.5h
+  // of a voxel: the triangles that near the block hold them all. One search
+  // of the mesh for the block, then each query tries only those few.
+  double reach = std::sqrt(3.0) * 3.5 * h;  // the centre's farthest voxel in a whole block
+  for (int q = 0; q < 8; ++q) {
+    const int qx = (q >> 2) * 4, qy = ((q >> 1) & 1) * 4, qz = (q & 1) * 4;
+    if (qx >= b.n[0] || qy >= b.n[1] || qz >= b.n[2]) continue;
+    reach = std::max(reach, (b.first_center + h * Vec3(qx + 1.5, qy + 1.5, qz + 1.5) - centre).norm() + hq);
+  }
+  // (And each quarter's own, from those.)
+  thread_local std::vector<unsigned> near;
+  thread_local std::array<std::vector<unsigned>, 8> qnear;
+  target.triangles_near(centre, reach + 1.5 * h, near);
   std::array<std::optional<double>, 8> dq;
   std::array<bool, 8> quarter_far{};
   for (int q = 0; q < 8; ++q) {
     const int qx = (q >> 2) * 4, qy = ((q >> 1) & 1) * 4, qz = (q & 1) * 4;
     if (qx >= b.n[0] || qy >= b.n[1] || qz >= b.n[2]) continue;
     const Vec3 cq = b.first_center + h * Vec3(qx + 1.5, qy + 1.5, qz + 1.5);
+    const auto qi = static_cast<std::size_t>(q);
+    qnear[qi].clear();
     if ((cq - centre).norm() + hq <= std::fabs(dc) - h) continue;  // saturated from the block's centre
-    dq[static_cast<std::size_t>(q)] = target.signed_distance_if_within(cq, hq + 1.5 * h);
-    quarter_far[static_cast<std::size_t>(q)] = !dq[static_cast<std::size_t>(q)];
+    target.triangles_near(cq, hq + 1.5 * h, near, qnear[qi]);
+    dq[qi] = target.signed_distance_if_within(cq, hq + 1.5 * h, qnear[qi]);
+    quarter_far[qi] = !dq[qi];
   }
   int unknown = 0;
   for (int x = 0; x < b.n[0]; ++x)
@@ -229,7 +245,7 @@ void block_target_distances(const stock::VoxelBlock& b, const Vec3& centre, doub
         } else if (dq[q] && (p - (b.first_center + h * Vec3((x & ~3) + 1.5, (y & ~3) + 1.5, (z & ~3) + 1.5))).norm() <=
                                 std::fabs(*dq[q]) - h) {
           dt[i] = *dq[q] < 0 ? -hf : hf;
-        } else if (const auto d = quarter_far[q] ? std::nullopt : target.signed_distance_if_within(p, 1.5 * h)) {
+        } else if (const auto d = quarter_far[q] ? std::nullopt : target.signed_distance_if_within(p, 1.5 * h, qnear[q])) {
           dt[i] = static_cast<float>(std::clamp(*d, -h, h));
         } else if (r <= h) {
           dt[i] = dc < 0 ? -hf : hf;  // the centre lies in this voxel's empty ball
@@ -371,13 +387,33 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
   r.vertex_deviation_mm.resize(nv);
   // Neighbouring vertices are near each other in the mesher's order, and
   // distance is 1-Lipschitz: |d(v)| <= |d(u)| + |v - u| bounds the search.
+  // The triangles near a recent vertex are kept: while a vertex's search
+  // ball lies inside theirs, it tries only those.
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nv), [&](const auto& range) {
     double last = -1;
     Vec3 last_p = Vec3::Zero();
+    std::vector<unsigned> kept;
+    Vec3 kept_c = Vec3::Zero();
+    double kept_r = -1;
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const Vec3& p = machined.positions[i];
-      const double d = last < 0 ? target.signed_distance(p)
-                                 : target.signed_distance_within(p, (last + (p - last_p).norm()) * (1 + 1e-9) + 1e-12);
+      double d;
+      if (last < 0) {
+        d = target.signed_distance(p);
+      } else {
+        const double radius = (last + (p - last_p).norm()) * (1 + 1e-9) + 1e-12;
+        if (radius > 8 * h) {  // far from the target: a ball that large would keep too many
+          d = target.signed_distance_within(p, radius);
+        } else {
+        if ((p - kept_c).norm() + radius > kept_r) {
+          kept_c = p;
+          kept_r = radius + 6 * h;
+          target.triangles_near(kept_c, kept_r, kept);
+        }
+        const auto near = target.signed_distance_if_within(p, radius, kept);
+        d = near ? *near : target.signed_distance(p);
+        }
+      }
       r.vertex_deviation_mm[i] = static_cast<float>(d);
       last = std::fabs(d);
       last_p = p;

@@ -61,26 +61,60 @@ struct Target::Impl {
     int feature = 0;
   };
 
-  static bool callback(RTCPointQueryFunctionArguments* args) {
-    Query& q = *static_cast<Query*>(args->userPtr);
-    const auto& t = q.self->mesh.triangles[args->primID];
-    const Vec3 &a = q.self->mesh.positions[t[0]], &b = q.self->mesh.positions[t[1]], &c3 = q.self->mesh.positions[t[2]];
+  // The squared distance from `p` to triangle `f`'s box.
+  double box_distance2(unsigned f, const Vec3& p) const {
+    const auto& t = mesh.triangles[f];
+    const Vec3 &a = mesh.positions[t[0]], &b = mesh.positions[t[1]], &c = mesh.positions[t[2]];
+    return (a.cwiseMin(b).cwiseMin(c) - p).cwiseMax(p - a.cwiseMax(b).cwiseMax(c)).cwiseMax(0.0).squaredNorm();
+  }
+
+  // Triangle `f` as a candidate: true when it is the nearest so far.
+  bool consider(Query& q, unsigned f) const {
     // Embree offers every triangle of a tree leaf whose box meets the
     // sphere: the triangle's own box rejects most of the others cheaply.
-    const Vec3 out = (a.cwiseMin(b).cwiseMin(c3) - q.p).cwiseMax(q.p - a.cwiseMax(b).cwiseMax(c3)).cwiseMax(0.0);
-    if (out.squaredNorm() >= q.best2) return false;
-    int f;
-    const Vec3 c = closest_on_triangle(q.p, a, b, c3, f);
+    if (box_distance2(f, q.p) >= q.best2) return false;
+    const auto& t = mesh.triangles[f];
+    int feature;
+    const Vec3 c = closest_on_triangle(q.p, mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]], feature);
     const double d2 = (c - q.p).squaredNorm();
-    if (d2 < q.best2) {
-      q.best2 = d2;
-      q.closest = c;
-      q.prim = args->primID;
-      q.feature = f;
-      args->query->radius = static_cast<float>(std::sqrt(d2) * (1 + 1e-6) + 1e-9);
-      return true;
-    }
+    if (d2 >= q.best2) return false;
+    q.best2 = d2;
+    q.closest = c;
+    q.prim = f;
+    q.feature = feature;
+    return true;
+  }
+
+  static bool callback(RTCPointQueryFunctionArguments* args) {
+    Query& q = *static_cast<Query*>(args->userPtr);
+    if (!q.self->consider(q, args->primID)) return false;
+    args->query->radius = static_cast<float>(std::sqrt(q.best2) * (1 + 1e-6) + 1e-9);
+    return true;
+  }
+
+  struct Gather {
+    const Impl* self;
+    Vec3 p;
+    double r2;
+    std::vector<unsigned>* out;
+  };
+  static bool gather(RTCPointQueryFunctionArguments* args) {
+    const Gather& g = *static_cast<const Gather*>(args->userPtr);
+    if (g.self->box_distance2(args->primID, g.p) <= g.r2) g.out->push_back(args->primID);
     return false;
+  }
+
+  // Embree's query for a ball (in floats, relative to `origin`: grown a
+  // little so that rounding drops no triangle within it).
+  RTCPointQuery ball(const Vec3& p, double radius) const {
+    RTCPointQuery pq;
+    const Vec3 l = p - origin;
+    pq.x = static_cast<float>(l.x());
+    pq.y = static_cast<float>(l.y());
+    pq.z = static_cast<float>(l.z());
+    pq.time = 0;
+    pq.radius = std::isfinite(radius) ? static_cast<float>(radius * (1 + 1e-5) + 1e-6) : std::numeric_limits<float>::infinity();
+    return pq;
   }
 
   // Closest point within `radius`; false when there is none.
@@ -91,13 +125,7 @@ struct Target::Impl {
     q.self = this;
     q.p = p;
     q.best2 = std::isfinite(radius) ? radius * radius : std::numeric_limits<double>::infinity();
-    RTCPointQuery pq;
-    const Vec3 l = p - origin;
-    pq.x = static_cast<float>(l.x());
-    pq.y = static_cast<float>(l.y());
-    pq.z = static_cast<float>(l.z());
-    pq.time = 0;
-    pq.radius = std::isfinite(radius) ? static_cast<float>(radius * (1 + 1e-5) + 1e-6) : std::numeric_limits<float>::infinity();
+    RTCPointQuery pq = ball(p, radius);
     RTCPointQueryContext ctx;
     rtcInitPointQueryContext(&ctx);
     const double limit = q.best2;
@@ -221,6 +249,35 @@ double Target::signed_distance_within(const Vec3& p, double radius) const {
 std::optional<double> Target::signed_distance_if_within(const Vec3& p, double radius) const {
   Impl::Query q;
   if (impl_->closest(p, radius, q)) return impl_->sign_at(q) * std::sqrt(q.best2);
+  return std::nullopt;
+}
+
+void Target::triangles_near(const Vec3& c, double radius, std::vector<unsigned>& out) const {
+  out.clear();
+  Impl::Gather g{impl_.get(), c, radius * radius * (1 + 1e-9), &out};
+  RTCPointQuery pq = impl_->ball(c, radius);
+  RTCPointQueryContext ctx;
+  rtcInitPointQueryContext(&ctx);
+  rtcPointQuery(impl_->scene, &pq, &ctx, &Impl::gather, &g);
+}
+
+void Target::triangles_near(const Vec3& c, double radius, const std::vector<unsigned>& from,
+                            std::vector<unsigned>& out) const {
+  out.clear();
+  const double r2 = radius * radius * (1 + 1e-9);
+  for (const unsigned f : from)
+    if (impl_->box_distance2(f, c) <= r2) out.push_back(f);
+}
+
+std::optional<double> Target::signed_distance_if_within(const Vec3& p, double radius,
+                                                        const std::vector<unsigned>& near) const {
+  Impl::Query q;
+  q.self = impl_.get();
+  q.p = p;
+  q.best2 = radius * radius;
+  const double limit = q.best2;
+  for (const unsigned f : near) impl_->consider(q, f);
+  if (q.best2 < limit) return impl_->sign_at(q) * std::sqrt(q.best2);
   return std::nullopt;
 }
 

@@ -5,6 +5,7 @@
 // which is exact for closed, consistently oriented meshes.
 #include <memory>
 #include <optional>
+#include <vector>
 
 #include "cutsim/core/mesh.h"
 
@@ -25,6 +26,17 @@ public:
   /// The signed distance when the surface lies within `radius` of `p`;
   /// otherwise nothing (cheap: no unbounded search).
   std::optional<double> signed_distance_if_within(const Vec3& p, double radius) const;
+  /// The triangles that may lie within `radius` of `c` (every one that does,
+  /// and some a little farther), for many queries near one place.
+  void triangles_near(const Vec3& c, double radius, std::vector<unsigned>& out) const;
+  /// The same, taken from `from` (which holds every triangle near enough).
+  void triangles_near(const Vec3& c, double radius, const std::vector<unsigned>& from,
+                      std::vector<unsigned>& out) const;
+  /// signed_distance_if_within over `near` only: the same answer when `near`
+  /// holds every triangle within `radius` of `p` (triangles_near of a ball
+  /// that holds the query's), without a search of the whole mesh.
+  std::optional<double> signed_distance_if_within(const Vec3& p, double radius,
+                                                  const std::vector<unsigned>& near) const;
   /// Inside by ray parity (a cross-check for tests; not robust on edges).
   bool inside(const Vec3& p) const;
   /// For diagnosis: the closest triangle, its feature and point.
