@@ -61,11 +61,12 @@ struct Target::Impl {
     int feature = 0;
   };
 
+  std::vector<Aabb> face_box;  // each triangle's box, kept together for the culls
+
   // The squared distance from `p` to triangle `f`'s box.
   double box_distance2(unsigned f, const Vec3& p) const {
-    const auto& t = mesh.triangles[f];
-    const Vec3 &a = mesh.positions[t[0]], &b = mesh.positions[t[1]], &c = mesh.positions[t[2]];
-    return (a.cwiseMin(b).cwiseMin(c) - p).cwiseMax(p - a.cwiseMax(b).cwiseMax(c)).cwiseMax(0.0).squaredNorm();
+    const Aabb& b = face_box[f];
+    return (b.min - p).cwiseMax(p - b.max).cwiseMax(0.0).squaredNorm();
   }
 
   // Triangle `f` as a candidate: true when it is the nearest so far.
@@ -185,6 +186,7 @@ Target::Target(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
   m.volume = m.mesh.signed_volume();
   const std::size_t nf = m.mesh.triangles.size(), nv = m.mesh.positions.size();
   m.face_n.resize(nf);
+  m.face_box.reserve(nf);
   m.vertex_n.assign(nv, Vec3::Zero());
   for (std::size_t f = 0; f < nf; ++f) {
     const auto& t = m.mesh.triangles[f];
@@ -192,6 +194,7 @@ Target::Target(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
     Vec3 n = (b - a).cross(c - a);
     const double len = n.norm();
     m.face_n[f] = len > 0 ? Vec3(n / len) : Vec3::Zero();
+    m.face_box.push_back(Aabb{a.cwiseMin(b).cwiseMin(c), a.cwiseMax(b).cwiseMax(c)});
     const Vec3* v[3] = {&a, &b, &c};
     for (int k = 0; k < 3; ++k) {
       const Vec3 e1 = (*v[(k + 1) % 3] - *v[k]).normalized(), e2 = (*v[(k + 2) % 3] - *v[k]).normalized();
