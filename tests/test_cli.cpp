@@ -56,9 +56,7 @@ void expect_error(const Case& c) {
   EXPECT_NE(err.find(c.message), std::string::npos) << err;
   EXPECT_FALSE(fs::exists(outdir + "/prog.glb"));
   EXPECT_FALSE(fs::exists(outdir + "/prog.report.json"));
-  if (fs::exists(outdir)) {
-    EXPECT_TRUE(fs::is_empty(outdir)) << "no partial files";
-  }
+  EXPECT_FALSE(fs::exists(outdir)) << "the output directory the run made is removed again";
 }
 
 TEST(Cli, MalformedWordGivesLineColumnAndCaret) {
@@ -97,6 +95,27 @@ TEST(Cli, UnwritableOutputDirectoryCannotCreate) {
   std::string err;
   EXPECT_EQ(run_cli("run " + prog + " --stock-box -2,-2,-1,3,2,0 -o " + blocker + "/sub", nullptr, &err), 73);
   EXPECT_NE(err.find(blocker + "/sub: error: cannot create output directory"), std::string::npos) << err;
+}
+
+// A run that fails leaves no trace: the directories it made for its
+// output go again (all the levels it made), one that was there stays.
+TEST(Cli, FailedRunRemovesTheOutputDirectoriesItMadeAndKeepsOthers) {
+  TempDir dir;
+  const auto prog = dir.write("prog.nc", "G0 X0 Y0 Z1\nG1 X1 Y\n");
+  std::string err;
+  EXPECT_EQ(run_cli("run " + prog + " --stock-box -2,-2,-1,3,2,0 -o " + dir.file("a/b/c"), nullptr, &err), 65);
+  EXPECT_NE(err.find("prog.nc:2:7: error"), std::string::npos) << err;
+  EXPECT_FALSE(fs::exists(dir.file("a"))) << "made by the run";
+  fs::create_directories(dir.file("kept"));
+  EXPECT_EQ(run_cli("run " + prog + " --stock-box -2,-2,-1,3,2,0 -o " + dir.file("kept/new"), nullptr, &err), 65);
+  EXPECT_TRUE(fs::is_directory(dir.file("kept")));
+  EXPECT_FALSE(fs::exists(dir.file("kept/new")));
+  // A run that succeeds keeps what it made, with its result in it.
+  const auto good = dir.write("good.nc", kGood);
+  EXPECT_EQ(run_cli("run " + good + " --stock-box -2,-2,-1,3,2,0 --voxel 0.02 -o " + dir.file("a/b"), nullptr, &err), 0)
+      << err;
+  EXPECT_TRUE(fs::exists(dir.file("a/b/good.glb")));
+  EXPECT_TRUE(fs::exists(dir.file("a/b/good.report.json")));
 }
 
 TEST(Cli, BadCommandLineIsUsage) {

@@ -54,7 +54,7 @@ Action add_compare_command(CLI::App& app) {
                                          : sim::load_target(a->target, job.target_scale, job.target_rotate_deg,
                                                             job.target_offset_mm);
     const double tolerance = a->tolerance >= 0 ? a->tolerance : job.tolerance_mm.value_or(0.001);
-    io::ensure_writable_directory(a->outdir);
+    const io::OutputDirectory output_dir(a->outdir);  // removed again if the run fails before writing
 
     std::string ext = fs::path(a->machined).extension().string();
     for (auto& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));

@@ -153,7 +153,7 @@ Action add_run_command(CLI::App& app) {
       opt.target_file = target_file;
     }
     const double tolerance = args->tolerance >= 0 ? args->tolerance : opt.job.tolerance_mm.value_or(0.001);
-    io::ensure_writable_directory(args->outdir);
+    const io::OutputDirectory output_dir(args->outdir);  // removed again if the run fails before writing
 
     ProgressBar bar;
     opt.progress = [&bar](double f, int line) { bar.update(f, line); };

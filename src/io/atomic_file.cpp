@@ -65,16 +65,35 @@ void write_file_atomic(const std::string& path, std::string_view bytes) {
   f.commit();
 }
 
-void ensure_writable_directory(const std::string& dir) {
+OutputDirectory::OutputDirectory(const std::string& dir) {
   std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec) throw OutputError(dir, "cannot create output directory: " + ec.message());
-  if (!fs::is_directory(dir, ec)) throw OutputError(dir, "output path is not a directory");
-  const std::string probe = (fs::path(dir) / (".cutsim-probe." + std::to_string(::getpid()))).string();
-  const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd < 0) throw OutputError(dir, std::string("cannot write to output directory: ") + std::strerror(errno));
-  ::close(fd);
-  ::unlink(probe.c_str());
+  // The levels that do not exist yet, deepest first: these are ours.
+  for (fs::path p = fs::absolute(dir, ec).lexically_normal(); !p.empty() && p != p.root_path(); p = p.parent_path()) {
+    if (p.filename().empty()) continue;  // a trailing separator
+    if (fs::exists(fs::symlink_status(p, ec))) break;
+    created_.push_back(p.string());
+  }
+  try {
+    fs::create_directories(dir, ec);
+    if (ec) throw OutputError(dir, "cannot create output directory: " + ec.message());
+    if (!fs::is_directory(dir, ec)) throw OutputError(dir, "output path is not a directory");
+    const std::string probe = (fs::path(dir) / (".cutsim-probe." + std::to_string(::getpid()))).string();
+    const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    if (fd < 0) throw OutputError(dir, std::string("cannot write to output directory: ") + std::strerror(errno));
+    ::close(fd);
+    ::unlink(probe.c_str());
+  } catch (...) {
+    remove_empty();
+    throw;
+  }
 }
+
+void OutputDirectory::remove_empty() noexcept {
+  std::error_code ec;
+  for (const std::string& d : created_)
+    if (!fs::remove(d, ec)) break;  // not empty (the result is in it), or gone: keep the rest
+}
+
+OutputDirectory::~OutputDirectory() { remove_empty(); }
 
 }  // namespace cutsim::io

@@ -2,6 +2,7 @@
 #include <cstddef>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace cutsim::io {
 
@@ -29,9 +30,21 @@ private:
   int fd_ = -1;
 };
 
-/// Creates `dir` (and parents) if needed and checks that a file can be
-/// created in it; leaves nothing behind.
-/// @throw OutputError when the directory cannot be created or written.
-void ensure_writable_directory(const std::string& dir);
+/// An output directory made ready: `dir` (and its parents) created if
+/// missing, and checked that a file can be created in it. The directories
+/// it created are removed again when it is destroyed while they are still
+/// empty, so a run that fails before writing its result leaves no trace.
+class OutputDirectory {
+public:
+  /// @throw OutputError when the directory cannot be created or written.
+  explicit OutputDirectory(const std::string& dir);
+  ~OutputDirectory();
+  OutputDirectory(const OutputDirectory&) = delete;
+  OutputDirectory& operator=(const OutputDirectory&) = delete;
+
+private:
+  void remove_empty() noexcept;
+  std::vector<std::string> created_;  // deepest first
+};
 
 }  // namespace cutsim::io
