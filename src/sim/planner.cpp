@@ -105,9 +105,8 @@ bool per_revolution(const motion::Move& m, const PlannedMove& p, const tool::Too
 }
 }  // namespace
 
-sweep::Sweep Planner::sweep_part_(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool, double s0,
+sweep::Sweep Planner::part_sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool, double s0,
                                  double s1) const {
-  if (s0 <= 0 && s1 >= 1) return sweep_(m, p, tool);
   const tool::Shape shape = tool::cutting_shape(tool);
   if (per_revolution(m, p, tool)) {
     const double rev_s = 60.0 / m.spindle_rpm, ta = p.t0 + s0 * (p.t1 - p.t0), tb = p.t0 + s1 * (p.t1 - p.t0);
@@ -127,18 +126,16 @@ sweep::Sweep Planner::sweep_part_(const motion::Move& m, const PlannedMove& p, c
 
 sweep::Sweep Planner::sweep_part(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool, double s0,
                                  double s1) const {
-  sweep::Sweep s = sweep_part_(m, p, tool, s0, s1);
+  sweep::Sweep s = s0 <= 0 && s1 >= 1 ? whole_sweep(m, p, tool) : part_sweep(m, p, tool, s0, s1);
   if (!opt_.interest.empty()) sweep::clip_bounds(s, opt_.interest);
   return s;
 }
 
 sweep::Sweep Planner::sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const {
-  sweep::Sweep s = sweep_(m, p, tool);
-  if (!opt_.interest.empty()) sweep::clip_bounds(s, opt_.interest);
-  return s;
+  return sweep_part(m, p, tool, 0.0, 1.0);
 }
 
-sweep::Sweep Planner::sweep_(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const {
+sweep::Sweep Planner::whole_sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const {
   const tool::Shape shape = tool::cutting_shape(tool);
   if (per_revolution(m, p, tool)) {
     // One swing torus per revolution, at the instants the program's time

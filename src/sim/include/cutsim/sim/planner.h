@@ -56,9 +56,10 @@ public:
   void set_file(std::string f) { file_ = std::move(f); }
 
 private:
-  sweep::Sweep sweep_(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const;
-  sweep::Sweep sweep_part_(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool, double s0,
-                           double s1) const;
+  // The two without the clipping (sweep and sweep_part apply it).
+  sweep::Sweep whole_sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool) const;
+  sweep::Sweep part_sweep(const motion::Move& m, const PlannedMove& p, const tool::Tool& tool, double s0,
+                          double s1) const;
   machine::JointValues joints_at(const motion::Move& m, const PlannedMove& p, double s) const;
   machine::JointValues with_laser_error(machine::JointValues q, double t) const;
 
