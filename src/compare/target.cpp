@@ -1,5 +1,6 @@
 #include "cutsim/compare/target.h"
 
+#include <array>
 #include <cmath>
 #include <limits>
 #include <unordered_map>
@@ -43,7 +44,9 @@ struct Target::Impl {
   Vec3 origin;  // Embree works in floats: coordinates relative to this
   std::vector<Vec3> face_n;      // unit face normals
   std::vector<Vec3> vertex_n;    // angle-weighted pseudonormals
-  std::unordered_map<std::uint64_t, Vec3> edge_n;  // sum of the two face normals
+  // Each triangle's edges' pseudonormals (the sum of the two faces'
+  // normals), edges ab, bc, ca: kept per triangle, not looked up by edge.
+  std::vector<std::array<Vec3, 3>> face_edge_n;
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
   double volume = 0;
@@ -142,9 +145,9 @@ struct Target::Impl {
       case 1: n = vertex_n[t[0]]; break;
       case 2: n = vertex_n[t[1]]; break;
       case 3: n = vertex_n[t[2]]; break;
-      case 4: n = edge_n.at(edge_key(t[0], t[1])); break;
-      case 5: n = edge_n.at(edge_key(t[1], t[2])); break;
-      default: n = edge_n.at(edge_key(t[2], t[0])); break;
+      case 4: n = face_edge_n[q.prim][0]; break;
+      case 5: n = face_edge_n[q.prim][1]; break;
+      default: n = face_edge_n[q.prim][2]; break;
     }
     return (q.p - q.closest).dot(n) >= 0 ? 1.0 : -1.0;
   }
@@ -185,6 +188,7 @@ Target::Target(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
   m.origin = m.box.center();
   m.volume = m.mesh.signed_volume();
   const std::size_t nf = m.mesh.triangles.size(), nv = m.mesh.positions.size();
+  std::unordered_map<std::uint64_t, Vec3> edge_n;  // sum of the two face normals, by edge
   m.face_n.resize(nf);
   m.face_box.reserve(nf);
   m.vertex_n.assign(nv, Vec3::Zero());
@@ -203,8 +207,13 @@ Target::Target(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
       // try_emplace with an explicit zero: Eigen's default constructor leaves
       // the coefficients uninitialised, so operator[] would add to garbage.
       const auto key = Impl::edge_key(t[static_cast<std::size_t>(k)], t[static_cast<std::size_t>((k + 1) % 3)]);
-      m.edge_n.try_emplace(key, Vec3::Zero()).first->second += m.face_n[f];
+      edge_n.try_emplace(key, Vec3::Zero()).first->second += m.face_n[f];
     }
+  }
+  m.face_edge_n.resize(nf);
+  for (std::size_t f = 0; f < nf; ++f) {
+    const auto& t = m.mesh.triangles[f];
+    for (std::size_t k = 0; k < 3; ++k) m.face_edge_n[f][k] = edge_n.at(Impl::edge_key(t[k], t[(k + 1) % 3]));
   }
   m.device = rtcNewDevice(nullptr);
   if (!m.device) throw GeometryError({}, "Embree: cannot create a device");
