@@ -6,6 +6,7 @@
 // is exact; curved faces and the edges where the CSG max() is not a true
 // distance move the surface by a small fraction of a voxel. We allow
 // 0.05 h per mm^2 of cut surface: |V - V_exact| <= 0.05 * h * A_cut.
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <limits>
@@ -299,6 +300,76 @@ TEST(Volume, EveryVoxelInsideTheBlockIsTheNearestPiecesDepth) {
   EXPECT_GT(air.load(), 40000u);  // the cuts' insides, where quarters are set to air whole
   EXPECT_GT(s.stats().voxels_aired, 10000u);
   EXPECT_EQ(differ.load(), 0u);
+}
+
+TEST(Volume, BlocksDeepInsideAPieceAreAiredWholeAndNoVoxelMore) {
+  // A d=9 flat end plunges 6 mm and moves aside: its cylinder holds 32^3-
+  // and 128^3-voxel blocks deeper than the band and their half diagonals,
+  // which are set to air without listing their leaves. The ROI ends
+  // inside the cylinder (at x = 2.3), where no block is whole. The voxels
+  // on two planes through the cut (x = 0 and z = -3: the cylinder's side,
+  // the blocks' edges, the ROI's end) must hold exactly
+  // clamp(-min_k d_k, -gamma, gamma), and the volume must be the cylinder's.
+  const double h = 0.02;
+  const Aabb box{Vec3(-5, -5, -7), Vec3(5, 5, 0)};
+  const Aabb roi{Vec3(-5, -5, -7), Vec3(2.3, 5, 0.5)};
+  stock::StockOptions so;
+  so.voxel_mm = h;
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  const tool::Tool t = tool::parse_tool_spec("flat:d=9,l=20", "test");
+  std::vector<sweep::Sweep> moves;
+  moves.push_back(sweep::sweep_line(Vec3(-0.2, 0.1, 1), Vec3(-0.2, 0.1, -6), I, t));
+  moves.push_back(sweep::sweep_line(Vec3(-0.2, 0.1, -6), Vec3(0.3, 0.4, -6), I, t));
+  stock::Stock s(box, roi, so);
+  const double v0 = s.removed_volume_mm3();
+  s.subtract(moves);
+  EXPECT_GE(s.stats().blocks_aired, 64u + 100u) << "no 128^3 block, or few 32^3 ones, aired whole";
+  const double g = s.band_mm();
+  const float gf = static_cast<float>(g);
+  std::atomic<std::size_t> checked{0}, air{0}, band{0}, differ{0};
+  s.for_each_roi_block([&](const stock::VoxelBlock& vb) {
+    const Vec3 lo = vb.first_center, hi = lo + h * Vec3(vb.n[0] - 1, vb.n[1] - 1, vb.n[2] - 1);
+    const bool on_x = lo.x() <= h / 2 && hi.x() >= -h / 2, on_z = lo.z() <= -3 + h / 2 && hi.z() >= -3 - h / 2;
+    if (!on_x && !on_z) return;
+    for (int x = 0; x < vb.n[0]; ++x)
+      for (int y = 0; y < vb.n[1]; ++y)
+        for (int z = 0; z < vb.n[2]; ++z) {
+          const Vec3 p = vb.first_center + h * Vec3(x, y, z);
+          if (std::fabs(p.x()) > h / 2 && std::fabs(p.z() + 3) > h / 2) continue;
+          const double inside = std::min((p - box.min).minCoeff(), (box.max - p).minCoeff());
+          if (inside < g + 2 * h) continue;  // the block's faces' band
+          double d = std::numeric_limits<double>::infinity();
+          for (const auto& m : moves)
+            for (const auto& prim : m.prims) d = std::min(d, sweep::distance(prim, p));
+          const float want = std::max(-gf, static_cast<float>(std::min(-d, g)));
+          const float got = vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z];
+          ++checked;
+          air += want == gf;
+          band += want < gf && want > -gf;
+          differ += got != want;
+        }
+  });
+  EXPECT_GT(checked.load(), 300000u);
+  EXPECT_GT(air.load(), 100000u);
+  EXPECT_GT(band.load(), 3000u);  // the cylinder's side and floor on the planes
+  EXPECT_EQ(differ.load(), 0u);
+  // The volume: the disc r=4.5 swept from (-0.2, 0.1) to (0.3, 0.4), within
+  // the ROI (its end snapped to the voxel cells) and the box, 6 mm deep;
+  // its area by midpoint sums.
+  const Vec3 a(-0.2, 0.1, 0), b(0.3, 0.4, 0);
+  const double x1 = s.roi().max.x();
+  ASSERT_NEAR(x1, 2.3, h);
+  const int n = 2000;
+  double area = 0;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      const Vec3 q(-5 + (x1 + 5) * (i + 0.5) / n, -5 + 10.0 * (j + 0.5) / n, 0);
+      const double u = std::clamp((q - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
+      area += (q - a - u * (b - a)).norm() <= 4.5;
+    }
+  area *= (x1 + 5) * 10.0 / (double(n) * n);
+  const double removed = s.removed_volume_mm3() - v0;
+  EXPECT_NEAR(removed, area * 6, 0.05 * h * (2 * area + 2 * kPi * 4.5 * 6));
 }
 
 TEST(Volume, BatchAppliedInPartsEqualsWhole) {

@@ -94,6 +94,7 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   j["active_voxels"] = st.active_voxels;
   j["voxel_evaluations"] = st.voxel_evaluations;
   j["voxels_aired_by_quarter"] = st.voxels_aired;
+  j["blocks_aired_whole"] = st.blocks_aired;
   j["stock_update_batches"] = st.grid_updates;
   j["leaf_nodes"] = st.leaf_nodes;
   j["idle_leaves"] = st.idle_leaves;

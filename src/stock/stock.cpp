@@ -460,9 +460,48 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     acc += std::chrono::duration<double>(t - t_lap).count();
     t_lap = t;
   };
-  // Steps 2-4 on the pairs binned so far (sorted here).
-  auto apply = [&](std::vector<std::uint64_t>& pairs) {
+  // Blocks of 32^3 or 128^3 voxels that some 1-Lipschitz piece holds
+  // deeper than the band and the block's half diagonal: every voxel of
+  // them becomes air whatever the other pieces do, so the binning lists
+  // none of their leaves (a roughing piece holds most of what it reaches
+  // this way: millions of leaves at 1 um) and they are set to air first.
+  struct AirBlock {
+    Coord origin;
+    int dim;
+  };
+  std::vector<std::vector<AirBlock>> air_per_prim(prims.size());
+  // Steps 2-4 on the pairs binned so far (sorted here), after the blocks
+  // the pieces [from, to) hold (step 1b).
+  auto apply = [&](std::vector<std::uint64_t>& pairs, std::size_t from, std::size_t to) {
+    std::vector<Coord> aired;  // 32^3 blocks that may now hold only air
+    auto block_of = [](const Coord& o) { return Coord(o.x() & ~(kMid - 1), o.y() & ~(kMid - 1), o.z() & ~(kMid - 1)); };
+    // 1b. Topology, on one thread: the blocks held deep inside a piece
+    //     become air tiles; the pairs in them are then passed over as air.
+    {
+      openvdb::tree::ValueAccessor<openvdb::FloatTree> tacc(tree);
+      for (std::size_t i = from; i < to; ++i) {
+        for (const AirBlock& b : air_per_prim[i]) {
+          m.blocks_aired += static_cast<std::size_t>((b.dim / kMid) * (b.dim / kMid) * (b.dim / kMid));
+          if (b.dim == kNode1Dim) {
+            tacc.addTile(2, b.origin, m.gamma, false);
+            for (int x = 0; x < kNode1Dim; x += kMid)
+              for (int y = 0; y < kNode1Dim; y += kMid)
+                for (int z = 0; z < kNode1Dim; z += kMid) aired.push_back(b.origin.offsetBy(x, y, z));
+            continue;
+          }
+          for (int x = 0; x < b.dim; x += kLeafDim)
+            for (int y = 0; y < b.dim; y += kLeafDim)
+              for (int z = 0; z < b.dim; z += kLeafDim) {
+                const Coord o = b.origin.offsetBy(x, y, z);
+                if (tacc.probeLeaf(o) || tacc.getValue(o) <= 0) tacc.addTile(1, o, m.gamma, false);
+              }
+          aired.push_back(block_of(b.origin));
+        }
+        std::vector<AirBlock>().swap(air_per_prim[i]);
+      }
+    }
     if (pairs.empty() || interrupted()) {
+      m.refresh_occupancy(std::move(aired));
       lap(m.bin_s);
       return;
     }
@@ -531,8 +570,6 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     //    become air tiles.
     std::vector<LeafT*> leaves;
     std::vector<std::size_t> leaf_group;
-    std::vector<Coord> aired;  // blocks that may now hold only air
-    auto block_of = [](const Coord& o) { return Coord(o.x() & ~(kMid - 1), o.y() & ~(kMid - 1), o.z() & ~(kMid - 1)); };
     // The leaves come in key order, neighbours mostly: an accessor keeps
     // the path down from the root between them.
     openvdb::tree::ValueAccessor<openvdb::FloatTree> tacc(tree);
@@ -862,10 +899,19 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           for (int y = bb.min().y() & ~7; y <= bb.max().y(); y += kLeafDim)
             for (int z = bb.min().z() & ~7; z <= bb.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
       } else {
+        const bool lip = sweep::lipschitz(p);
         for_each_leaf_block(
             m.origin, h, bb,
             [&](const Vec3& c, double hd, const Coord& bo, int dim) {
-              return (dim != kMid || m.may_hold_material(bo)) && sweep::distance(p, c) <= g + hd;
+              if (dim == kMid && !m.may_hold_material(bo)) return false;
+              const double d = sweep::distance(p, c);
+              if (d > g + hd) return false;
+              // Each voxel's distance is then at most -g: air (step 1b).
+              if (lip && d <= -(g + hd) && m.roi_index.isInside(CoordBBox::createCube(bo, dim))) {
+                air_per_prim[i].push_back({bo, dim});
+                return false;
+              }
+              return true;
             },
             leaf);
       }
@@ -892,9 +938,10 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       pairs.insert(pairs.end(), per_prim[i].begin(), per_prim[i].end());
       std::vector<std::uint64_t>().swap(per_prim[i]);
     }
+    const std::size_t from = first;
     first = c0;
     binned = 0;
-    apply(pairs);
+    apply(pairs, from, c0);
     if (interrupted()) return;
   }
 }
@@ -1136,6 +1183,7 @@ StockStats Stock::stats() const {
   StockStats s;
   s.voxel_evaluations = impl_->voxel_evaluations.load();
   s.voxels_aired = impl_->voxels_aired.load();
+  s.blocks_aired = impl_->blocks_aired;
   s.grid_updates = impl_->grid_updates;
   s.bin_s = impl_->bin_s;
   s.classify_s = impl_->classify_s;
