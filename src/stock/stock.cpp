@@ -476,28 +476,46 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     std::vector<Coord> aired;  // 32^3 blocks that may now hold only air
     auto block_of = [](const Coord& o) { return Coord(o.x() & ~(kMid - 1), o.y() & ~(kMid - 1), o.z() & ~(kMid - 1)); };
     // 1b. Topology, on one thread: the blocks held deep inside a piece
-    //     become air tiles; the pairs in them are then passed over as air.
+    //    become air tiles; the pairs in them are then passed over as air.
+    //    Pieces of a batch overlap, so most blocks come more than once.
     {
-      openvdb::tree::ValueAccessor<openvdb::FloatTree> tacc(tree);
+      std::vector<AirBlock> blocks;
       for (std::size_t i = from; i < to; ++i) {
-        for (const AirBlock& b : air_per_prim[i]) {
-          m.blocks_aired += static_cast<std::size_t>((b.dim / kMid) * (b.dim / kMid) * (b.dim / kMid));
-          if (b.dim == kNode1Dim) {
-            tacc.addTile(2, b.origin, m.gamma, false);
-            for (int x = 0; x < kNode1Dim; x += kMid)
-              for (int y = 0; y < kNode1Dim; y += kMid)
-                for (int z = 0; z < kNode1Dim; z += kMid) aired.push_back(b.origin.offsetBy(x, y, z));
-            continue;
-          }
-          for (int x = 0; x < b.dim; x += kLeafDim)
-            for (int y = 0; y < b.dim; y += kLeafDim)
-              for (int z = 0; z < b.dim; z += kLeafDim) {
-                const Coord o = b.origin.offsetBy(x, y, z);
-                if (tacc.probeLeaf(o) || tacc.getValue(o) <= 0) tacc.addTile(1, o, m.gamma, false);
-              }
-          aired.push_back(block_of(b.origin));
-        }
+        blocks.insert(blocks.end(), air_per_prim[i].begin(), air_per_prim[i].end());
         std::vector<AirBlock>().swap(air_per_prim[i]);
+      }
+      auto before = [](const AirBlock& a, const AirBlock& b) { return a.dim != b.dim ? a.dim > b.dim : a.origin < b.origin; };
+      std::sort(blocks.begin(), blocks.end(), before);
+      blocks.erase(std::unique(blocks.begin(), blocks.end(),
+                               [](const AirBlock& a, const AirBlock& b) { return a.dim == b.dim && a.origin == b.origin; }),
+                   blocks.end());
+      openvdb::tree::ValueAccessor<openvdb::FloatTree> tacc(tree);
+      for (const AirBlock& b : blocks) {
+        if (b.dim == kNode1Dim) {
+          // (the binning listed it only if one of its 32^3 blocks may hold material)
+          for (int x = 0; x < kNode1Dim; x += kMid)
+            for (int y = 0; y < kNode1Dim; y += kMid)
+              for (int z = 0; z < kNode1Dim; z += kMid) {
+                const Coord bo = b.origin.offsetBy(x, y, z);
+                if (!m.may_hold_material(bo)) continue;
+                aired.push_back(bo);
+                ++m.blocks_aired;
+              }
+          tacc.addTile(2, b.origin, m.gamma, false);
+          continue;
+        }
+        bool changed = false;
+        for (int x = 0; x < b.dim; x += kLeafDim)
+          for (int y = 0; y < b.dim; y += kLeafDim)
+            for (int z = 0; z < b.dim; z += kLeafDim) {
+              const Coord o = b.origin.offsetBy(x, y, z);
+              if (!tacc.probeLeaf(o) && tacc.getValue(o) > 0) continue;  // air already
+              tacc.addTile(1, o, m.gamma, false);
+              changed = true;
+            }
+        if (!changed) continue;
+        aired.push_back(b.origin);
+        ++m.blocks_aired;
       }
     }
     if (pairs.empty() || interrupted()) {
@@ -871,6 +889,14 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   // reaches some 450k leaves). Where a batch is split follows the counts
   // only, so runs repeat exactly; the union removed does not depend on it.
   std::vector<std::vector<std::uint64_t>> per_prim(prims.size());
+  // Whether a 128^3 block may hold material in any of its 32^3 blocks.
+  auto any_material = [&m](const Coord& o) {
+    for (int x = 0; x < kNode1Dim; x += kMid)
+      for (int y = 0; y < kNode1Dim; y += kMid)
+        for (int z = 0; z < kNode1Dim; z += kMid)
+          if (m.may_hold_material(o.offsetBy(x, y, z))) return true;
+    return false;
+  };
   auto bin = [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (interrupted()) return;  // abandoned: the caller throws
@@ -904,6 +930,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             m.origin, h, bb,
             [&](const Vec3& c, double hd, const Coord& bo, int dim) {
               if (dim == kMid && !m.may_hold_material(bo)) return false;
+              if (dim == kNode1Dim && !any_material(bo)) return false;
               const double d = sweep::distance(p, c);
               if (d > g + hd) return false;
               // Each voxel's distance is then at most -g: air (step 1b).

@@ -53,9 +53,9 @@ struct StockStats {
   /// Voxels set to air with no distance of their own: their 4^3 quarter
   /// lies deeper than the band inside one piece.
   std::size_t voxels_aired = 0;
-  /// 32^3-voxel blocks set to air whole, their leaves never listed: a piece
-  /// held the block deeper than the band and its half diagonal (a 128^3
-  /// block counts 64).
+  /// 32^3-voxel blocks that held material and were set to air whole, their
+  /// leaves never listed: a piece held the block (or the 128^3 block around
+  /// it) deeper than the band and the block's half diagonal.
   std::size_t blocks_aired = 0;
   /// Updates of the grid: one per batch, more where a batch passed
   /// StockOptions::max_update_pairs and was applied in parts.
