@@ -193,8 +193,8 @@ TEST(Compare, NearTrianglesAnswerAsTheWholeMesh) {
   const std::size_t all = target.mesh().triangles.size();
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-1, 1);
-  std::vector<unsigned> near;
-  std::size_t found = 0, largest = 0;
+  std::vector<unsigned> near, sub;
+  std::size_t found = 0, largest = 0, smaller = 0;
   for (int k = 0; k < 20000; ++k) {
     Vec3 dir(u(rng), u(rng), u(rng));
     if (dir.norm() < 0.1) continue;
@@ -211,10 +211,19 @@ TEST(Compare, NearTrianglesAnswerAsTheWholeMesh) {
     if (!whole) continue;
     ++found;
     ASSERT_EQ(*local, *whole) << "at (" << p.transpose() << "), r " << r;
+    // The set for the query's own ball, taken from the larger one (as a
+    // voxel quarter's from its block's): triangle by triangle, so smaller.
+    target.triangles_near(p, r, near, sub);
+    ASSERT_LE(sub.size(), near.size());
+    const auto own = target.signed_distance_if_within(p, r, sub);
+    ASSERT_TRUE(own.has_value()) << "at (" << p.transpose() << "), r " << r;
+    ASSERT_EQ(*own, *whole) << "at (" << p.transpose() << "), r " << r;
+    smaller += sub.size() < near.size();
     // The distance to a sphere of 192 x 96 facets: within its sagitta.
     EXPECT_NEAR(*whole, p.norm() - 1, 1e-3);
   }
   EXPECT_GT(found, 10000u);
+  EXPECT_GT(smaller, found / 2) << "a smaller ball inside should keep fewer triangles";
   EXPECT_LT(largest, all / 10) << "the near set should be a small part of the mesh";
 }
 

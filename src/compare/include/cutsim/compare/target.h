@@ -26,8 +26,8 @@ public:
   /// The signed distance when the surface lies within `radius` of `p`;
   /// otherwise nothing (cheap: no unbounded search).
   std::optional<double> signed_distance_if_within(const Vec3& p, double radius) const;
-  /// The triangles that may lie within `radius` of `c` (every one that does,
-  /// and some a little farther), for many queries near one place.
+  /// The triangles within `radius` of `c` (every one that does; one a
+  /// rounding error farther may come too), for many queries near one place.
   void triangles_near(const Vec3& c, double radius, std::vector<unsigned>& out) const;
   /// The same, taken from `from` (which holds every triangle near enough).
   void triangles_near(const Vec3& c, double radius, const std::vector<unsigned>& from,
