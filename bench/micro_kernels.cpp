@@ -51,6 +51,28 @@ BENCHMARK_CAPTURE(sweep_distance, flat_horizontal, "G0 X0 Y0 Z0\nG1 X1 Y0.5 F1\n
 BENCHMARK_CAPTURE(sweep_distance, flat_ramp, "G0 X0 Y0 Z0\nG1 X1 Y0.5 Z-0.1 F1\n", "flat:d=1");
 BENCHMARK_CAPTURE(sweep_distance, flat_g17_arc, "G0 X1 Y0 Z0\nG3 X-1 Y0 R1 F1\n", "flat:d=1");
 
+// A ball end turning while it moves (5-axis finishing, as the blade's):
+// the hull piece of a 1 mm ball with a 2.5 mm core, 10 um along the path
+// while its axis tilts 0.5 deg. Points on a sphere around the start's
+// centre at the ball's radius +-3 um: where the stock update asks.
+void BM_HullPieceDistance(benchmark::State& state) {
+  const double a = 0.5 * M_PI / 180, L = 2.5;
+  const Vec3 c0(0, 0, 0), c1(0.01, 0.002, 0.001);
+  const sweep::Primitive p = sweep::hull_prim(c0, c0 + Vec3(0, 0, L), c1, c1 + L * Vec3(std::sin(a), 0, std::cos(a)), 0.5);
+  std::vector<Vec3> pts;
+  for (int i = 0; i < 4096; ++i) {
+    const double z = 1 - 2 * (i + 0.5) / 4096, r = std::sqrt(1 - z * z), phi = 2.399963229728653 * i;
+    pts.push_back((0.5 + 0.003 * std::sin(7.0 * i)) * Vec3(r * std::cos(phi), r * std::sin(phi), z));
+  }
+  std::size_t k = 0;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(sweep::distance(p, pts[k]));
+    k = (k + 1) & 4095;
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_HullPieceDistance);
+
 void BM_StockSubtractBallPass(benchmark::State& state) {
   const double h = 0.001 * static_cast<double>(state.range(0));
   const tool::Tool t = tool::parse_tool_spec("ball:d=1");
