@@ -551,6 +551,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     std::vector<Vec3>& pair_g = m.scratch_g;
     pair_d.resize(pairs.size());
     pair_g.resize(pairs.size());
+    // The leaves the band splits from material tiles, made here on both
+    // threads with the tile's value; the topology step only links them in
+    // (at 1 um, made there, their allocation and first touch held the one
+    // thread for much of the step).
+    std::vector<std::unique_ptr<LeafT>> fresh(ng);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ng), [&](const auto& r) {
       if (interrupted()) return;
       for (std::size_t gi = r.begin(); gi != r.end(); ++gi) {
@@ -584,6 +589,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         }
         if (d - hd0 >= std::max(-vmin, 0.0)) continue;
         action[gi] = update;
+        if (!leaf) fresh[gi] = std::make_unique<LeafT>(o, tree.getValue(o), false);  // tiles are inactive
       }
     });
     lap(m.classify_s);
@@ -607,7 +613,12 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         }
         continue;
       }
-      leaves.push_back(tacc.touchLeaf(o));
+      if (fresh[gi]) {
+        leaves.push_back(fresh[gi].get());
+        tacc.addLeaf(fresh[gi].release());
+      } else {
+        leaves.push_back(tacc.touchLeaf(o));
+      }
       leaf_group.push_back(gi);
     }
     if (leaves.empty()) {
