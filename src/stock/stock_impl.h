@@ -28,6 +28,7 @@ struct Stock::Impl {
   // Scratch of the stock update, kept between calls: fresh arrays of this
   // size cost a page fault per 4 KB every time.
   std::vector<std::uint64_t> scratch_pairs;
+  std::vector<std::uint64_t> scratch_sort;  // radix sort's other buffer
   std::vector<double> scratch_d;
   std::vector<Vec3> scratch_g;
   std::size_t grid_updates = 0;                      // (bench figures, written on the calling thread)
