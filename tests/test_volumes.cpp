@@ -12,6 +12,7 @@
 #include <limits>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <tuple>
 
 #include "helpers.h"
@@ -259,6 +260,20 @@ TEST(Volume, BatchedSubtractEqualsMoveByMove) {
   EXPECT_EQ(differ, 0u);
 }
 
+// What the stock update must leave at voxel p, by brute force over every
+// piece: clamp(-min_k d_k, -gamma, gamma), as a float; nothing within the
+// stock block's own faces' band (their values are the block's, not a cut's).
+std::optional<float> brute_force_voxel(const std::vector<sweep::Sweep>& moves, const Aabb& box, const Vec3& p, double g,
+                                       double h) {
+  const double inside = std::min((p - box.min).minCoeff(), (box.max - p).minCoeff());
+  if (inside < g + 2 * h) return std::nullopt;
+  double d = std::numeric_limits<double>::infinity();
+  for (const auto& m : moves)
+    for (const auto& prim : m.prims) d = std::min(d, sweep::distance(prim, p));
+  const auto gf = static_cast<float>(g);
+  return std::max(-gf, static_cast<float>(std::min(-d, g)));
+}
+
 TEST(Volume, EveryVoxelInsideTheBlockIsTheNearestPiecesDepth) {
   // Deeper than the band inside the block the stock held -gamma, so after the cuts each
   // voxel must hold exactly clamp(-min_k d_k, -gamma, gamma), d_k the
@@ -284,12 +299,9 @@ TEST(Volume, EveryVoxelInsideTheBlockIsTheNearestPiecesDepth) {
       for (int y = 0; y < vb.n[1]; ++y)
         for (int z = 0; z < vb.n[2]; ++z) {
           const Vec3 p = vb.first_center + so.voxel_mm * Vec3(x, y, z);
-          const double inside = std::min((p - box.min).minCoeff(), (box.max - p).minCoeff());
-          if (inside < g + 2 * so.voxel_mm) continue;  // the block's faces' band
-          double d = std::numeric_limits<double>::infinity();
-          for (const auto& m : moves)
-            for (const auto& prim : m.prims) d = std::min(d, sweep::distance(prim, p));
-          const float want = std::max(-gf, static_cast<float>(std::min(-d, g)));
+          const auto want_at = brute_force_voxel(moves, box, p, g, so.voxel_mm);
+          if (!want_at) continue;  // the block's faces' band
+          const float want = *want_at;
           const float got = vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z];
           ++checked;
           air += want == gf;
@@ -336,12 +348,9 @@ TEST(Volume, BlocksDeepInsideAPieceAreAiredWholeAndNoVoxelMore) {
         for (int z = 0; z < vb.n[2]; ++z) {
           const Vec3 p = vb.first_center + h * Vec3(x, y, z);
           if (std::fabs(p.x()) > h / 2 && std::fabs(p.z() + 3) > h / 2) continue;
-          const double inside = std::min((p - box.min).minCoeff(), (box.max - p).minCoeff());
-          if (inside < g + 2 * h) continue;  // the block's faces' band
-          double d = std::numeric_limits<double>::infinity();
-          for (const auto& m : moves)
-            for (const auto& prim : m.prims) d = std::min(d, sweep::distance(prim, p));
-          const float want = std::max(-gf, static_cast<float>(std::min(-d, g)));
+          const auto want_at = brute_force_voxel(moves, box, p, g, h);
+          if (!want_at) continue;  // the block's faces' band
+          const float want = *want_at;
           const float got = vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z];
           ++checked;
           air += want == gf;
