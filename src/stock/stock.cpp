@@ -85,14 +85,19 @@ float quarter_min(const float* data, int qx, int qy, int qz) {
 }
 
 // Calls leaf(origin) for each leaf-sized block of `bb`, going down through
-// the 128- and 32-voxel cubes that `keep(centre, half_diagonal, origin,
-// dim)` accepts (world centre; the half diagonal reaches the cube's
-// farthest voxel centre; the cube's first voxel and its width).
+// the 128-, 32- and 16-voxel cubes that `keep(centre, half_diagonal,
+// origin, dim)` accepts (world centre; the half diagonal reaches the cube's
+// farthest voxel centre; the cube's first voxel and its width). The 16^3
+// level: a 32^3 block within reach of a thin piece's surface has most of
+// its leaves out of reach (blade 2 um: 204 M leaves visited without it,
+// 137 M with it, for 27 M more block tests).
 constexpr int kMid = 1 << Stock::Impl::kBlockLog2;  // the occupancy map's blocks
+constexpr int kSub = 2 * kLeafDim;
 
 template <class Keep, class Leaf>
 void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep keep, Leaf leaf) {
-  const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * h, hd2 = std::sqrt(3.0) * 0.5 * (kMid - 1) * h;
+  const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * h, hd2 = std::sqrt(3.0) * 0.5 * (kMid - 1) * h,
+               hd3 = std::sqrt(3.0) * 0.5 * (kSub - 1) * h;
   auto centre = [&](int x, int y, int z, int dim) {
     return Vec3(origin + h * (Vec3(x, y, z).array() + 0.5 * (dim - 1)).matrix());
   };
@@ -112,11 +117,20 @@ void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep
               CoordBBox mid = CoordBBox::createCube(Coord(x2, y2, z2), kMid);
               mid.intersect(part);
               if (mid.empty()) continue;
-              const Coord p0(mid.min().x() & ~(kLeafDim - 1), mid.min().y() & ~(kLeafDim - 1),
-                             mid.min().z() & ~(kLeafDim - 1));
-              for (int x = p0.x(); x <= mid.max().x(); x += kLeafDim)
-                for (int y = p0.y(); y <= mid.max().y(); y += kLeafDim)
-                  for (int z = p0.z(); z <= mid.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
+              const Coord s0(mid.min().x() & ~(kSub - 1), mid.min().y() & ~(kSub - 1), mid.min().z() & ~(kSub - 1));
+              for (int x3 = s0.x(); x3 <= mid.max().x(); x3 += kSub)
+                for (int y3 = s0.y(); y3 <= mid.max().y(); y3 += kSub)
+                  for (int z3 = s0.z(); z3 <= mid.max().z(); z3 += kSub) {
+                    if (!keep(centre(x3, y3, z3, kSub), hd3, Coord(x3, y3, z3), kSub)) continue;
+                    CoordBBox sub = CoordBBox::createCube(Coord(x3, y3, z3), kSub);
+                    sub.intersect(mid);
+                    if (sub.empty()) continue;
+                    const Coord p0(sub.min().x() & ~(kLeafDim - 1), sub.min().y() & ~(kLeafDim - 1),
+                                   sub.min().z() & ~(kLeafDim - 1));
+                    for (int x = p0.x(); x <= sub.max().x(); x += kLeafDim)
+                      for (int y = p0.y(); y <= sub.max().y(); y += kLeafDim)
+                        for (int z = p0.z(); z <= sub.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
+                  }
             }
       }
 }
@@ -478,7 +492,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
 
   // 1. Bin the pieces by leaf: (leaf, piece) keys for every leaf a
   //    piece's box (grown by the band) reaches, in parallel per piece.
-  const LeafKeys keys(m.roi_index, prims.size());
+  // (Piece number prims.size() marks a leaf some piece holds deeper than
+  // the band and the leaf's half diagonal: it becomes air whatever the
+  // other pieces, so classifying it needs no distance.)
+  const LeafKeys keys(m.roi_index, prims.size() + 1);
+  const auto kDeep = static_cast<std::uint32_t>(prims.size());
   if (keys.total > 64) {
     // More pieces than the key holds beside this ROI's leaves: halves (the
     // union removed does not depend on the split).
@@ -589,7 +607,16 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       for (std::size_t gi = r.begin(); gi != r.end(); ++gi) {
         if (interrupted()) return;
         const Coord o = keys.origin(pairs[group[gi]]);
+        // Marked deep (the mark sorts last): air, and nothing to measure.
+        if (keys.piece(pairs[group[gi + 1] - 1]) == kDeep) {
+          action[gi] = to_air;
+          continue;
+        }
+        // An air tile (step 1b's blocks) stays air: no distances either.
+        const LeafT* leaf = tree.probeConstLeaf(o);
+        if (!leaf && tree.getValue(o) > 0) continue;
         const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
+        const bool whole = m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
         double d = std::numeric_limits<double>::infinity();
         for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
           const sweep::Primitive& piece = *prims[keys.piece(pairs[k])];
@@ -598,23 +625,16 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             pair_g[k] = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
           }
           d = std::min(d, pair_d[k]);
+          if (d < -(g + hd0) && whole) break;  // air, whatever the rest
         }
         if (d > g + hd0) continue;
-        const bool whole = m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
         if (d < -(g + hd0) && whole) {
           action[gi] = to_air;
           continue;
         }
         // Only d(p) < -v(p) changes a voxel, and d(p) >= d - hd0 outside the
         // cut: a leaf whose deepest material is shallower than that stays.
-        const LeafT* leaf = tree.probeConstLeaf(o);
-        double vmin;
-        if (leaf) {
-          vmin = leaf_min(leaf->buffer().data());
-        } else {
-          vmin = tree.getValue(o);
-          if (vmin > 0) continue;  // air tile
-        }
+        const double vmin = leaf ? leaf_min(leaf->buffer().data()) : tree.getValue(o);
         if (d - hd0 >= std::max(-vmin, 0.0)) continue;
         action[gi] = update;
         if (!leaf) fresh[gi] = std::make_unique<LeafT>(o, tree.getValue(o), false);  // tiles are inactive
@@ -963,7 +983,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       auto leaf = [&](const Coord& o) {
         if (!acc.probeConstLeaf(o) && acc.getValue(o) > 0) return;  // air tile
         const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
-        if (sweep::distance(p, c0) <= g + hd0) out.push_back(keys.key(o, id));
+        const double d = sweep::distance(p, c0);
+        if (d > g + hd0) return;
+        // (the test step 2 makes on the smallest distance)
+        const bool deep = d < -(g + hd0) && m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
+        out.push_back(keys.key(o, deep ? kDeep : id));
       };
       if (nl <= kListLeaves && !sweep::lipschitz(p)) {
         for (int x = bb.min().x() & ~7; x <= bb.max().x(); x += kLeafDim)
@@ -978,6 +1002,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               if (dim == kNode1Dim && !any_material(bo)) return false;
               const double d = sweep::distance(p, c);
               if (d > g + hd) return false;
+              if (dim == kSub) return true;  // (blocks set to air whole are the occupancy map's: 32^3 or 128^3)
               // Each voxel's distance is then at most -g: air (step 1b).
               if (lip && d <= -(g + hd) && m.roi_index.isInside(CoordBBox::createCube(bo, dim))) {
                 air_per_prim[i].push_back({bo, dim});
