@@ -87,14 +87,16 @@ float quarter_min(const float* data, int qx, int qy, int qz) {
 // Calls leaf(origin) for each leaf-sized block of `bb`, going down through
 // the 128-, 32- and 16-voxel cubes that `keep(centre, half_diagonal,
 // origin, dim)` accepts (world centre; the half diagonal reaches the cube's
-// farthest voxel centre; the cube's first voxel and its width). The 16^3
-// level: a 32^3 block within reach of a thin piece's surface has most of
-// its leaves out of reach (blade 2 um: 204 M leaves visited without it,
-// 137 M with it, for 27 M more block tests).
+// farthest voxel centre; the cube's first voxel and its width). With
+// kSubLevel, the 16^3 cubes too: a 32^3 block within reach of a thin
+// piece's surface has most of its leaves out of reach (blade 2 um: 204 M
+// leaves visited without it, 137 M with it, for 27 M more block tests).
+// Without it the leaves of a 32^3 cube come in x, y, z order (the order
+// the contact check breaks ties in).
 constexpr int kMid = 1 << Stock::Impl::kBlockLog2;  // the occupancy map's blocks
 constexpr int kSub = 2 * kLeafDim;
 
-template <class Keep, class Leaf>
+template <bool kSubLevel = false, class Keep, class Leaf>
 void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep keep, Leaf leaf) {
   const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * h, hd2 = std::sqrt(3.0) * 0.5 * (kMid - 1) * h,
                hd3 = std::sqrt(3.0) * 0.5 * (kSub - 1) * h;
@@ -117,6 +119,17 @@ void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep
               CoordBBox mid = CoordBBox::createCube(Coord(x2, y2, z2), kMid);
               mid.intersect(part);
               if (mid.empty()) continue;
+              auto leaves_of = [&](const CoordBBox& blk) {
+                const Coord p0(blk.min().x() & ~(kLeafDim - 1), blk.min().y() & ~(kLeafDim - 1),
+                               blk.min().z() & ~(kLeafDim - 1));
+                for (int x = p0.x(); x <= blk.max().x(); x += kLeafDim)
+                  for (int y = p0.y(); y <= blk.max().y(); y += kLeafDim)
+                    for (int z = p0.z(); z <= blk.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
+              };
+              if constexpr (!kSubLevel) {
+                leaves_of(mid);
+                continue;
+              }
               const Coord s0(mid.min().x() & ~(kSub - 1), mid.min().y() & ~(kSub - 1), mid.min().z() & ~(kSub - 1));
               for (int x3 = s0.x(); x3 <= mid.max().x(); x3 += kSub)
                 for (int y3 = s0.y(); y3 <= mid.max().y(); y3 += kSub)
@@ -124,12 +137,7 @@ void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep
                     if (!keep(centre(x3, y3, z3, kSub), hd3, Coord(x3, y3, z3), kSub)) continue;
                     CoordBBox sub = CoordBBox::createCube(Coord(x3, y3, z3), kSub);
                     sub.intersect(mid);
-                    if (sub.empty()) continue;
-                    const Coord p0(sub.min().x() & ~(kLeafDim - 1), sub.min().y() & ~(kLeafDim - 1),
-                                   sub.min().z() & ~(kLeafDim - 1));
-                    for (int x = p0.x(); x <= sub.max().x(); x += kLeafDim)
-                      for (int y = p0.y(); y <= sub.max().y(); y += kLeafDim)
-                        for (int z = p0.z(); z <= sub.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
+                    if (!sub.empty()) leaves_of(sub);
                   }
             }
       }
@@ -494,9 +502,14 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   //    piece's box (grown by the band) reaches, in parallel per piece.
   // (Piece number prims.size() marks a leaf some piece holds deeper than
   // the band and the leaf's half diagonal: it becomes air whatever the
-  // other pieces, so classifying it needs no distance.)
-  const LeafKeys keys(m.roi_index, prims.size() + 1);
-  const auto kDeep = static_cast<std::uint32_t>(prims.size());
+  // other pieces, so classifying it needs no distance. Only where the
+  // mark fits in the key without splitting the batch: where a batch is
+  // split changes which uniform leaves end as tiles, and so which of
+  // equally deep voxels a contact reports.)
+  const LeafKeys keys_marked(m.roi_index, prims.size() + 1);
+  const bool marks = keys_marked.total <= 64;
+  const LeafKeys keys = marks ? keys_marked : LeafKeys(m.roi_index, prims.size());
+  const auto kDeep = marks ? static_cast<std::uint32_t>(prims.size()) : std::numeric_limits<std::uint32_t>::max();
   if (keys.total > 64) {
     // More pieces than the key holds beside this ROI's leaves: halves (the
     // union removed does not depend on the split).
@@ -995,7 +1008,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             for (int z = bb.min().z() & ~7; z <= bb.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
       } else {
         const bool lip = sweep::lipschitz(p);
-        for_each_leaf_block(
+        for_each_leaf_block<true>(
             m.origin, h, bb,
             [&](const Vec3& c, double hd, const Coord& bo, int dim) {
               if (dim == kMid && !m.may_hold_material(bo)) return false;
