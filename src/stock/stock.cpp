@@ -926,9 +926,16 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
                   }
                   if (j == nearest) continue;
                   // Convex pieces: the tangent plane at the last voxel; other
-                  // 1-Lipschitz pieces: the last value less the step.
+                  // 1-Lipschitz pieces: the last value less the step, on
+                  // squared lengths (c - thr >= |y - at|): a fly-cutter's tori
+                  // all cut within a voxel of each other, so every voxel
+                  // passes dozens of them, and the root was a quarter of the
+                  // update there.
                   if (n.bound == Near::plane && n.c + n.grad.dot(y) >= thr) continue;
-                  if (n.bound == Near::cone && n.c - (y - n.at).norm() >= thr) continue;
+                  if (n.bound == Near::cone) {
+                    const double margin = n.c - thr;
+                    if (margin >= 0 && margin * margin >= (y - n.at).squaredNorm()) continue;
+                  }
                   const double b2 = box_distance2(*n.box, p);
                   if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
                   eval(j);
