@@ -194,6 +194,81 @@ TEST(Sweep, ConvexPiecesGiveTheirDistanceAndATangentPlaneBelowIt) {
   EXPECT_FALSE(sweep::convex_distance(arc.prims.at(0), Vec3(0, 1, 0), &d, &g));
 }
 
+// A fly-cutter's torus is not convex, but on its cutting side (not nearer
+// the spindle axis than the tube's core circle) it lies above a convex
+// function equal to it there, so the stock update may cull tori with the
+// tangent plane as it does ball ends. Nearer the axis it must say no.
+TEST(Sweep, FlyCutterTorusGivesATangentPlaneBelowItOnItsCuttingSide) {
+  const tool::SwingTorus st{3, 0.5};
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.3, Vec3(0.2, 0.1, 1).normalized()).toRotationMatrix();
+  std::vector<sweep::Primitive> tori;
+  for (const Eigen::Matrix3d& m : {Eigen::Matrix3d(Eigen::Matrix3d::Identity()), R}) {
+    Pose pose = Pose::Identity();
+    pose.linear() = m;
+    pose.translation() = Vec3(0.2, -0.1, -0.05);
+    tori.push_back(sweep::sweep_tori({pose}, st).prims.at(0));
+  }
+  std::mt19937_64 rng(17);
+  int planes = 0, refused = 0, slopes = 0;
+  for (const auto& p : tori) {
+    const auto& tp = std::get<sweep::TorusPrim>(p);
+    const Aabb whole = sweep::bounds(p).expanded(0.5);
+    // Near the tip, where it cuts, and anywhere in and around the torus.
+    const Aabb tip{tp.origin - Vec3(1.2, 1.2, 0.3), tp.origin + Vec3(1.2, 1.2, 0.6)};
+    for (const Aabb& b : {tip, whole}) {
+      std::uniform_real_distribution<double> ux(b.min.x(), b.max.x()), uy(b.min.y(), b.max.y()), uz(b.min.z(), b.max.z());
+      for (int i = 0; i < 4000; ++i) {
+        const Vec3 x(ux(rng), uy(rng), uz(rng));
+        const Vec3 local = tp.to_local * (x - tp.origin);
+        const double u = std::hypot(local.x(), local.z() - st.swing);
+        double dx = 0;
+        Vec3 g;
+        const bool ok = sweep::convex_distance(p, x, &dx, &g);
+        // The torus at rest, in its own frame: the same distance.
+        EXPECT_NEAR(sweep::distance(p, x), tool::shape_distance(tool::Shape(st), local), 1e-12);
+        if (u < st.swing - st.nose_radius - 1e-9) {
+          EXPECT_FALSE(ok) << "at " << x.transpose();
+          ++refused;
+          continue;
+        }
+        if (u <= st.swing - st.nose_radius + 1e-9) continue;  // on the edge: either
+        ASSERT_TRUE(ok) << "at " << x.transpose();
+        ++planes;
+        EXPECT_EQ(dx, sweep::distance(p, x));
+        EXPECT_LE(g.norm(), 1 + 1e-12);
+        for (int j = 0; j < 8; ++j) {
+          // Anywhere: near x (where the plane is tight), and across the torus.
+          const Vec3 y = j < 4 ? Vec3(x + 0.05 * Vec3(ux(rng) - x.x(), uy(rng) - x.y(), uz(rng) - x.z()))
+                               : Vec3(ux(rng), uy(rng), uz(rng));
+          EXPECT_GE(sweep::distance(p, y), dx + g.dot(y - x) - 1e-12) << "from " << x.transpose() << " to "
+                                                                     << y.transpose();
+        }
+        const double e = 1e-7;
+        if (std::hypot(u - (st.swing - st.nose_radius), local.y()) > 1e-3) {
+          const Vec3 fd((sweep::distance(p, x + Vec3(e, 0, 0)) - sweep::distance(p, x - Vec3(e, 0, 0))) / (2 * e),
+                        (sweep::distance(p, x + Vec3(0, e, 0)) - sweep::distance(p, x - Vec3(0, e, 0))) / (2 * e),
+                        (sweep::distance(p, x + Vec3(0, 0, e)) - sweep::distance(p, x - Vec3(0, 0, e))) / (2 * e));
+          EXPECT_NEAR((fd - g).norm(), 0, 1e-5) << "at " << x.transpose();
+          ++slopes;
+        }
+      }
+    }
+  }
+  EXPECT_GT(planes, 8000);
+  EXPECT_GT(slopes, 8000);
+  EXPECT_GT(refused, 1000);  // the inside of the swing, nearer the axis
+  // The plane is tight where the fly-cut needs it: a voxel (10 um) beside
+  // the tip, the torus lies within 0.1 um of it (the cone bound, last
+  // value less the step, is 10 um below).
+  const auto& p = tori[0];
+  const Vec3 x = std::get<sweep::TorusPrim>(p).origin + Vec3(0.3, 0.2, 0.01);
+  double dx = 0;
+  Vec3 g;
+  ASSERT_TRUE(sweep::convex_distance(p, x, &dx, &g));
+  const Vec3 y = x + Vec3(0.01, 0, 0);
+  EXPECT_LT(sweep::distance(p, y) - (dx + g.dot(y - x)), 1e-4);
+}
+
 // A ball end turning while it moves becomes hull pieces: the core's hull
 // at the two ends of each piece, grown by the ball. A roll about the
 // motion turns the axis out of the motion's plane (the hull is then a

@@ -334,7 +334,7 @@ double distance(const Primitive& p, const Vec3& x) {
     else if constexpr (std::is_same_v<T, ArcPrim>) return arc_distance(q, x);
     else if constexpr (std::is_same_v<T, ProfilePrim>) return profile_distance(q, x);
     else if constexpr (std::is_same_v<T, HullPrim>) return detail::hull_offset(x, q).norm() - q.radius;
-    else return tool::shape_distance(q.torus, q.to_local * (x - q.origin));
+    else return torus_distance(q, x);
   }, p);
 }
 

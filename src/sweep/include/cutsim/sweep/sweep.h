@@ -102,7 +102,8 @@ const Aabb& bounds(const Primitive& p);
 bool lipschitz(const Primitive& p);
 /// Where the piece's distance is convex in x (a ball end's line: the
 /// distance to the parallelogram or segment its core sweeps less the
-/// ball's radius; a hull piece), sets `d` to the
+/// ball's radius; a hull piece), or bounded below by a convex function
+/// equal to it at x (a fly-cutter's torus on its cutting side), sets `d` to the
 /// distance at `x` (the same value `distance` gives) and `g` to a
 /// subgradient, so d(y) >= d(x) + g . (y - x) for every y; else returns
 /// false and sets nothing.
@@ -254,7 +255,31 @@ struct Off {
 /// p less its nearest point on the hull (zero inside).
 Vec3 hull_offset(const Vec3& p, const HullPrim& h);
 
+// A fly-cutter's swing torus (tool::SwingTorus: axis the frame's Y through
+// (0, 0, swing)) at a world point x: the point in the torus's frame, its
+// distance u from the spindle axis, q = u - a with a = swing - nose
+// radius the radius of the tube's core circle, and D = hypot(q, y) the
+// distance to that circle; the torus's distance is D - nose radius.
+struct TorusAt {
+  double x, y, z, u, q, D;
+};
+[[gnu::always_inline]] inline TorusAt torus_at(const TorusPrim& tp, const Vec3& w) {
+  const double rx = w.x() - tp.origin.x(), ry = w.y() - tp.origin.y(), rz = w.z() - tp.origin.z();
+  const Eigen::Matrix3d& m = tp.to_local;
+  const double x = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, y = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
+               z = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
+  const double s = tp.torus.swing;
+  const double u = hypot2(x, z - s);
+  const double q = u - (s - tp.torus.nose_radius);
+  return {x, y, z, u, q, hypot2(q, y)};
+}
+
 }  // namespace detail
+
+/// A fly-cutter torus's distance (what `distance` gives for it).
+[[gnu::always_inline]] inline double torus_distance(const TorusPrim& tp, const Vec3& x) {
+  return detail::torus_at(tp, x).D - tp.torus.nose_radius;
+}
 
 [[gnu::always_inline]] inline bool convex_distance(const Primitive& p, const Vec3& x, double* d, Vec3* g) {
   if (const auto* hp = std::get_if<HullPrim>(&p)) {
@@ -262,6 +287,29 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
     const double n = v.norm();
     *d = n - hp->radius;
     *g = n > 0 ? Vec3(v / n) : Vec3::Zero();
+    return true;
+  }
+  if (const auto* tp = std::get_if<TorusPrim>(&p)) {
+    // A fly-cutter's torus is not convex, but where u >= a (the cutting
+    // side: not nearer the spindle axis than the tube's core circle) its
+    // distance equals H - r, H = hypot(max(u - a, 0), y), and H is convex
+    // everywhere: u is a norm, max(u - a, 0) convex and >= 0, and hypot is
+    // convex and growing in a non-negative argument. D >= H everywhere
+    // (|u - a| >= max(u - a, 0)), so H's tangent plane at x bounds the
+    // distance everywhere: d(y) >= H(y) - r >= d(x) + g . (y - x). Nearer
+    // the axis than a (far above the tip) the plane would not hold: no.
+    const detail::TorusAt t = detail::torus_at(*tp, x);
+    if (!(t.q >= 0 && t.u > 0)) return false;
+    *d = t.D - tp->torus.nose_radius;
+    if (!(t.D > 0)) {
+      *g = Vec3::Zero();  // on the core circle: H's least value, 0 a subgradient
+    } else {
+      const double gu = t.q / (t.D * t.u);
+      const double gx = gu * t.x, gy = t.y / t.D, gz = gu * (t.z - tp->torus.swing);
+      const Eigen::Matrix3d& m = tp->to_local;  // its transpose applied
+      *g = Vec3(m(0, 0) * gx + m(1, 0) * gy + m(2, 0) * gz, m(0, 1) * gx + m(1, 1) * gy + m(2, 1) * gz,
+                m(0, 2) * gx + m(1, 2) * gy + m(2, 2) * gz);
+    }
     return true;
   }
   const auto* lp = std::get_if<LinearPrim>(&p);
