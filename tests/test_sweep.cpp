@@ -269,6 +269,43 @@ TEST(Sweep, FlyCutterTorusGivesATangentPlaneBelowItOnItsCuttingSide) {
   EXPECT_LT(sweep::distance(p, y) - (dx + g.dot(y - x)), 1e-4);
 }
 
+// A fly-cutter revolution's box, cut to the stock's reach: only the tip's
+// few micrometres reach into the stock, so the box must hold every point
+// of the torus within the reach, and little more (the stock bins each
+// torus into the leaves its box covers).
+TEST(Sweep, FlyCutterTorusBoxClippedToTheReachHoldsAllOfItThere) {
+  const tool::SwingTorus st{18, 2};
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.02, Vec3(1, 0.5, 0).normalized()).toRotationMatrix();
+  const Aabb reach{Vec3(-1.05, -0.05, -0.55), Vec3(1.05, 10.05, 0.05)};  // a fly-cut's stock, grown 50 um
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> unit(0, 1);
+  int within = 0;
+  for (const Eigen::Matrix3d& m : {Eigen::Matrix3d(Eigen::Matrix3d::Identity()), R}) {
+    Pose pose = Pose::Identity();
+    pose.linear() = m;
+    pose.translation() = Vec3(0.3, 4, -0.003);
+    sweep::Sweep s = sweep::sweep_tori({pose}, st);
+    sweep::clip_bounds(s, reach);
+    const Aabb b = sweep::bounds(s.prims.at(0));
+    if (m.isIdentity()) {  // (tilted 20 mrad, the reach's far corners lift the top)
+      EXPECT_LT(b.max.y() - b.min.y(), 1.0);  // the whole tube is 4 mm across
+      EXPECT_LT(b.max.z() - b.min.z(), 0.06);
+    }
+    // Points of the solid torus near its tip: the swing angle within 0.1 rad
+    // of the bottom, anywhere around the tube, any depth in it.
+    for (int i = 0; i < 200000; ++i) {
+      const double th = 0.1 * (2 * unit(rng) - 1), ph = 2 * M_PI * unit(rng), rho = st.nose_radius * std::sqrt(unit(rng));
+      const double u = st.swing - st.nose_radius + rho * std::cos(ph);
+      const Vec3 local(u * std::sin(th), rho * std::sin(ph), st.swing - u * std::cos(th));
+      const Vec3 w = pose * local;
+      if (!reach.contains(w)) continue;
+      ++within;
+      ASSERT_TRUE(b.expanded(1e-12).contains(w)) << "torus point " << w.transpose() << " outside the clipped box";
+    }
+  }
+  EXPECT_GT(within, 200);
+}
+
 // A ball end turning while it moves becomes hull pieces: the core's hull
 // at the two ends of each piece, grown by the ball. A roll about the
 // motion turns the axis out of the motion's plane (the hull is then a

@@ -454,6 +454,11 @@ void clip_bounds(Sweep& s, const Aabb& reach) {
       const Aabb local = tool::shape_bounds_below(tool::Shape(pp->edge), top);
       b = world_box(local, Rl, pp->origin);
       b.extend(world_box(local, Rl, tip1));
+    } else if (auto* tp = std::get_if<TorusPrim>(&p)) {
+      // A fly-cutter's revolution: only the tip's few micrometres reach in.
+      const Eigen::Matrix3d Rl = tp->to_local.transpose();
+      b = world_box(tool::shape_bounds_below(tool::Shape(tp->torus), top_within(Rl.col(2), tp->origin, reach)), Rl,
+                    tp->origin);
     }
     b = b.intersected(reach);
     if (!b.empty()) all.extend(b.min), all.extend(b.max);

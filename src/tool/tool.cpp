@@ -170,6 +170,19 @@ Aabb shape_bounds_below(const Shape& s, double top) {
     low.edge.height = std::max(top, 0.0);
     return shape_bounds(low);
   }
+  if (const auto* t = std::get_if<SwingTorus>(&s); t && top < 2 * t->swing) {
+    // A point of the torus at height z <= top lies within the tip circle
+    // (hypot(x, z - swing) <= swing), so x^2 <= 2 swing z - z^2; and its
+    // distance from the axis is at least swing - z, so where z <= nose
+    // radius its tube offset is at least nose radius - z: y^2 <= 2 r z - z^2.
+    // Both grow with z up to swing and r. A fly-cut 3 um deep reaches some
+    // 50 um into the stock's reach: its box is then 0.5 mm across Y, not 4.
+    const double z = std::max(top, 0.0);
+    const double zx = std::min(z, t->swing), zy = std::min(z, t->nose_radius);
+    const double hx = std::sqrt(std::max(2 * t->swing * zx - zx * zx, 0.0));
+    const double hy = std::sqrt(std::max(2 * t->nose_radius * zy - zy * zy, 0.0));
+    return Aabb{Vec3(-hx, -hy, 0), Vec3(hx, hy, z)};
+  }
   return shape_bounds(s);
 }
 

@@ -160,8 +160,9 @@ Aabb world_box_within(const tool::Shape& shape, const Eigen::Matrix3d& R, const 
 /// matters (the stock: its box grown by more than its band): binning,
 /// culling and "is anything near" tests then see a V tool's 10 um of cut,
 /// not its 0.1 mm edge. A profile prism's box is that of the part of its
-/// profile not higher along the tool axis than the top of `reach`; other
-/// pieces' boxes are cut to `reach`. `Sweep::distance` stays exact for
+/// profile not higher along the tool axis than the top of `reach`, a
+/// fly-cutter torus's that of its part below that top; other pieces'
+/// boxes are cut to `reach`. `Sweep::distance` stays exact for
 /// points within `reach` up to `reach`'s distance from their outside.
 void clip_bounds(Sweep& s, const Aabb& reach);
 

@@ -102,8 +102,9 @@ double shape_distance(const Shape& s, const Vec3& p);
 /// Box of the shape in the tool frame.
 Aabb shape_bounds(const Shape& s);
 /// Bounds of the part of a shape not higher than `top` along the tool axis
-/// (local z): a V tool's edge and flank body are 0.1 mm high, but only
-/// their lowest micrometres reach into the stock. Other shapes: all of it.
+/// (local z): a V tool's edge and flank body are 0.1 mm high, and a
+/// fly-cutter's torus 2 swings, but only their lowest micrometres reach
+/// into the stock. Other shapes: all of it.
 Aabb shape_bounds_below(const Shape& s, double top);
 
 /// Signed distance in the rake plane to the edge profile Q (no height cap):
