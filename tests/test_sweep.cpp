@@ -306,6 +306,50 @@ TEST(Sweep, FlyCutterTorusBoxClippedToTheReachHoldsAllOfItThere) {
   EXPECT_GT(within, 200);
 }
 
+// A piece whose distance is its core's less a radius (ball end line,
+// hull, fly-cutter torus) is bounded above by the distance to x's nearest
+// core point: d(y) <= d(x) + g . (y - x) + |y - x|^2 / 2D, D = d(x) + radius.
+// The stock update drops, per quarter of a leaf, the pieces whose planes
+// clear that bound of the nearest one; a bound too low would lose cuts.
+TEST(Sweep, CorePiecesAreBoundedAboveByTheirNearestCorePoint) {
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.4, Vec3(0.3, 1, 0.2).normalized()).toRotationMatrix();
+  std::vector<std::pair<std::string, sweep::Primitive>> pieces;
+  pieces.emplace_back("ball line", sweep::sweep_line(Vec3(0, 0, 0), Vec3(0.8, -0.3, 0.2), R, tool::parse_tool_spec("ball:d=1,l=1")).prims.at(0));
+  pieces.emplace_back("ball plunge", sweep::sweep_move(single_move("G0 X0 Y0 Z0\nG1 Z-0.7 F1\n"), tool::parse_tool_spec("ball:d=1,l=1")).prims.at(0));
+  pieces.emplace_back("hull", sweep::hull_prim(Vec3(0, 0, 0.5), Vec3(0.1, 0.2, 2.5), Vec3(1.0, 0.3, 0.4), Vec3(1.3, -0.4, 2.3), 0.5));
+  Pose pose = Pose::Identity();
+  pose.linear() = R;
+  pieces.emplace_back("torus", sweep::sweep_tori({pose}, tool::SwingTorus{3, 0.5}).prims.at(0));
+  std::mt19937_64 rng(29);
+  std::uniform_real_distribution<double> step(-0.2, 0.2);
+  for (const auto& [what, p] : pieces) {
+    EXPECT_FALSE(std::isnan(sweep::core_radius(p))) << what;
+    const Aabb b = std::holds_alternative<sweep::TorusPrim>(p) ? Aabb{Vec3(-1.5, -1, -0.3), Vec3(1.5, 1, 1)}
+                                                               : sweep::bounds(p).expanded(0.3);
+    std::uniform_real_distribution<double> ux(b.min.x(), b.max.x()), uy(b.min.y(), b.max.y()), uz(b.min.z(), b.max.z());
+    int checked = 0, bent = 0;
+    for (int i = 0; i < 20000; ++i) {
+      const Vec3 x(ux(rng), uy(rng), uz(rng));
+      double dx = 0;
+      Vec3 g;
+      if (!sweep::convex_distance(p, x, &dx, &g)) continue;
+      const double D = dx + sweep::core_radius(p);
+      if (!(D > 0)) continue;
+      const Vec3 h(step(rng), step(rng), step(rng));
+      const double bound = dx + g.dot(h) + h.squaredNorm() / (2 * D);
+      EXPECT_LE(sweep::distance(p, x + h), bound + 1e-12) << what << " from " << x.transpose() << " by " << h.transpose();
+      bent += sweep::distance(p, x + h) > dx + g.dot(h) + 1e-12;  // the plane alone is not enough
+      ++checked;
+    }
+    EXPECT_GT(checked, 5000) << what;
+    EXPECT_GT(bent, 100) << what;
+  }
+  // Other pieces have no core radius.
+  const sweep::Sweep arc =
+      sweep::sweep_move(single_move("G17 G0 X1 Y0 Z0\nG3 X-1 Y0 I-1 J0 F1\n"), tool::parse_tool_spec("flat:d=0.6,l=1"));
+  EXPECT_TRUE(std::isnan(sweep::core_radius(arc.prims.at(0))));
+}
+
 // A ball end turning while it moves becomes hull pieces: the core's hull
 // at the two ends of each piece, grown by the ball. A roll about the
 // motion turns the axis out of the motion's plane (the hull is then a

@@ -108,6 +108,14 @@ bool lipschitz(const Primitive& p);
 /// subgradient, so d(y) >= d(x) + g . (y - x) for every y; else returns
 /// false and sets nothing.
 inline bool convex_distance(const Primitive& p, const Vec3& x, double* d, Vec3* g);
+/// Where the piece's distance is the distance to a set (its core: a ball
+/// end's segment or the parallelogram it sweeps, a hull piece's
+/// tetrahedron, a torus's core circle) less a radius: that radius; else
+/// NaN. Where `convex_distance` gives d and g at x, g is the unit offset
+/// from x's nearest core point s, and |y - s| bounds the core's distance
+/// at y from above: with D = d(x) + radius > 0,
+/// d(y) <= d(x) + g . (y - x) + |y - x|^2 / (2 D).
+inline double core_radius(const Primitive& p);
 
 struct SweepOptions {
   /// Largest distance between an arc and the chords that stand for it where
@@ -335,6 +343,13 @@ struct TorusAt {
     }
   }
   return true;
+}
+
+inline double core_radius(const Primitive& p) {
+  if (const auto* hp = std::get_if<HullPrim>(&p)) return hp->radius;
+  if (const auto* tp = std::get_if<TorusPrim>(&p)) return tp->torus.nose_radius;
+  if (const auto* lp = std::get_if<LinearPrim>(&p); lp && lp->env.disk_radius == 0) return lp->env.corner_radius;
+  return std::numeric_limits<double>::quiet_NaN();
 }
 
 }  // namespace cutsim::sweep
