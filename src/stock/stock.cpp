@@ -487,6 +487,39 @@ constexpr std::int64_t kListLeaves = 4096;
 // 1 um: ~450k pairs each) bin at most this many before the budget is seen.
 constexpr std::size_t kBinChunk = 64;
 
+// Drops from `sub` (key, index) the pieces that no voxel within `hw` (per
+// axis) of `c` can have strictly nearer than the one of least key. That
+// one, if its distance is its core's less a radius (a ball end, a hull, a
+// torus: sweep::core_radius), is bounded above at every voxel by the
+// distance to its nearest core point at c, which lies within |y|^2 / 2D of
+// its tangent plane there; a piece whose lower bound (its plane at c,
+// `plane(k, &value, &gradient)`, or else its key less the half diagonal
+// `hd`) clears that bound everywhere in the box changes no voxel there. A
+// fly-cut's leaf is reached by some 1,400 tori within the band, of which
+// a few dozen can matter.
+template <class Piece, class Plane>
+void drop_beyond_nearest(std::vector<std::pair<double, std::uint32_t>>& sub, const Vec3& c, double hw, double hd,
+                         Piece piece, Plane plane) {
+  const auto ref = std::min_element(sub.begin(), sub.end());
+  const std::uint32_t kref = ref->second;
+  const sweep::Primitive& p0 = piece(kref);
+  const double rho = sweep::core_radius(p0);
+  double d0 = 0, D0 = 0;
+  Vec3 g0;
+  if (std::isnan(rho) || !sweep::convex_distance(p0, c, &d0, &g0) || !((D0 = d0 + rho) > 0)) return;
+  constexpr double kMargin = 1e-9;  // mm: far above the arithmetic's rounding
+  const double bend = 3 * hw * hw / (2 * D0);                // |y|^2 / 2D at the box's corners
+  const double top = d0 + hw * g0.cwiseAbs().sum() + bend;  // the upper bound's highest
+  std::erase_if(sub, [&](const std::pair<double, std::uint32_t>& e) {
+    const std::uint32_t k = e.second;
+    if (k == kref) return false;
+    double ck = 0;
+    Vec3 gk;
+    if (!plane(k, &ck, &gk)) return e.first - hd >= top + kMargin;
+    return ck - d0 - hw * (gk - g0).cwiseAbs().sum() - bend >= kMargin;
+  });
+}
+
 }  // namespace
 
 void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
@@ -762,6 +795,17 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           tiled[i] = leaf_state(leaf->buffer().data());
           continue;
         }
+        // Pieces no voxel of the leaf can have nearer than the nearest (its
+        // quarters then do the same with their own centres).
+        if (order.size() > kRun)
+          drop_beyond_nearest(order, lc, 0.5 * (kLeafDim - 1) * h, hd0,
+                              [&](std::uint32_t k) -> const sweep::Primitive& { return *prims[keys.piece(pairs[k])]; },
+                              [&](std::uint32_t k, double* c, Vec3* gr) {
+                                if (std::isnan(pair_g[k].x())) return false;
+                                *c = pair_d[k];
+                                *gr = pair_g[k];
+                                return true;
+                              });
         std::sort(order.begin(), order.end());
         cand.clear();
         cbox.clear();
@@ -815,33 +859,15 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             sub.emplace_back(key, static_cast<std::uint32_t>(k));
           }
           if (sub.empty()) continue;
-          // Pieces that no voxel of the quarter can take from the nearest. A
-          // piece whose distance is its core's less a radius (a ball end, a
-          // hull, a torus: sweep::core_radius) is bounded above at every
-          // voxel by the distance to its nearest core point at the centre,
-          // which lies within |y|^2 / 2D of its tangent plane there; a piece
-          // whose lower bound (its plane, or its key less the half diagonal)
-          // clears that over the whole quarter is never strictly nearer, so
-          // it changes no voxel. A fly-cut's quarter is reached by some 800
-          // tori within the band, of which a dozen can matter.
-          if (sub.size() > kRun) {
-            const auto ref = std::min_element(sub.begin(), sub.end());
-            const std::uint32_t kref = ref->second;
-            const double rho = sweep::core_radius(*cand[kref]);
-            double d0 = 0, D0 = 0;
-            Vec3 g0;
-            if (!std::isnan(rho) && sweep::convex_distance(*cand[kref], cb, &d0, &g0) && (D0 = d0 + rho) > 0) {
-              constexpr double kMargin = 1e-9;  // mm: far above the arithmetic's rounding
-              const double bend = 3 * hq * hq / (2 * D0);  // |y|^2 / 2D at the quarter's corners
-              const double top = d0 + hq * g0.cwiseAbs().sum() + bend;  // the upper bound's highest
-              std::erase_if(sub, [&](const std::pair<double, std::uint32_t>& e) {
-                const std::uint32_t k = e.second;
-                if (k == kref) return false;
-                if (std::isnan(seed_d[k])) return e.first - hd_sub >= top + kMargin;
-                return seed_d[k] - d0 - hq * (cgrad[k] - g0).cwiseAbs().sum() - bend >= kMargin;
-              });
-            }
-          }
+          // Pieces no voxel of the quarter can have nearer than the nearest.
+          if (sub.size() > kRun)
+            drop_beyond_nearest(sub, cb, hq, hd_sub, [&](std::uint32_t k) -> const sweep::Primitive& { return *cand[k]; },
+                                [&](std::uint32_t k, double* c, Vec3* gr) {
+                                  if (std::isnan(seed_d[k])) return false;
+                                  *c = seed_d[k];
+                                  *gr = cgrad[k];
+                                  return true;
+                                });
           std::sort(sub.begin(), sub.end());
           // A quarter deeper inside one 1-Lipschitz piece than the band and
           // its half diagonal: each voxel's distance is at most -g, so each is
