@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <mutex>
@@ -274,6 +275,40 @@ std::optional<float> brute_force_voxel(const std::vector<sweep::Sweep>& moves, c
   return std::max(-gf, static_cast<float>(std::min(-d, g)));
 }
 
+// The voxels of the stock's ROI against brute_force_voxel: how many were
+// checked, how many are air or in the band (the cut's surface), and how
+// many differ from it in any bit. With `near`, only the blocks whose
+// first and last voxel centres it accepts, and the voxels it accepts as
+// both (a plane through the cut).
+struct BruteForce {
+  std::size_t checked = 0, air = 0, surface = 0, differ = 0;
+};
+BruteForce against_brute_force(const stock::Stock& s, const std::vector<sweep::Sweep>& moves, const Aabb& box, double h,
+                               const std::function<bool(const Vec3&, const Vec3&)>& near = {}) {
+  const double g = s.band_mm();
+  const float gf = static_cast<float>(g);
+  std::atomic<std::size_t> checked{0}, air{0}, surface{0}, differ{0};
+  s.for_each_roi_block([&](const stock::VoxelBlock& vb) {
+    const Vec3 lo = vb.first_center, hi = lo + h * Vec3(vb.n[0] - 1, vb.n[1] - 1, vb.n[2] - 1);
+    if (near && !near(lo, hi)) return;
+    for (int x = 0; x < vb.n[0]; ++x)
+      for (int y = 0; y < vb.n[1]; ++y)
+        for (int z = 0; z < vb.n[2]; ++z) {
+          const Vec3 p = vb.first_center + h * Vec3(x, y, z);
+          if (near && !near(p, p)) continue;
+          const auto want_at = brute_force_voxel(moves, box, p, g, h);
+          if (!want_at) continue;  // the block's faces' band
+          const float want = *want_at;
+          const float got = vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z];
+          ++checked;
+          air += want == gf;
+          surface += want > -gf && want < gf;
+          differ += got != want;
+        }
+  });
+  return {checked.load(), air.load(), surface.load(), differ.load()};
+}
+
 TEST(Volume, EveryVoxelInsideTheBlockIsTheNearestPiecesDepth) {
   // Deeper than the band inside the block the stock held -gamma, so after the cuts each
   // voxel must hold exactly clamp(-min_k d_k, -gamma, gamma), d_k the
@@ -291,27 +326,11 @@ TEST(Volume, EveryVoxelInsideTheBlockIsTheNearestPiecesDepth) {
   moves.push_back(sweep::sweep_line(Vec3(0.0, -0.2, -0.1), Vec3(1.0, 1.1, -0.38), I, t));  // ramp across
   stock::Stock s(box, box, so);
   s.subtract(moves);
-  const double g = s.band_mm();
-  const float gf = static_cast<float>(g);
-  std::atomic<std::size_t> checked{0}, air{0}, differ{0};
-  s.for_each_roi_block([&](const stock::VoxelBlock& vb) {
-    for (int x = 0; x < vb.n[0]; ++x)
-      for (int y = 0; y < vb.n[1]; ++y)
-        for (int z = 0; z < vb.n[2]; ++z) {
-          const Vec3 p = vb.first_center + so.voxel_mm * Vec3(x, y, z);
-          const auto want_at = brute_force_voxel(moves, box, p, g, so.voxel_mm);
-          if (!want_at) continue;  // the block's faces' band
-          const float want = *want_at;
-          const float got = vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z];
-          ++checked;
-          air += want == gf;
-          differ += got != want;
-        }
-  });
-  EXPECT_GT(checked.load(), 200000u);
-  EXPECT_GT(air.load(), 40000u);  // the cuts' insides, where quarters are set to air whole
+  const BruteForce bf = against_brute_force(s, moves, box, so.voxel_mm);
+  EXPECT_GT(bf.checked, 200000u);
+  EXPECT_GT(bf.air, 40000u);  // the cuts' insides, where quarters are set to air whole
   EXPECT_GT(s.stats().voxels_aired, 10000u);
-  EXPECT_EQ(differ.load(), 0u);
+  EXPECT_EQ(bf.differ, 0u);
 }
 
 TEST(Volume, FlyCutVoxelsAreTheNearestTorussDepth) {
@@ -320,43 +339,28 @@ TEST(Volume, FlyCutVoxelsAreTheNearestTorussDepth) {
   // same voxels, which the update culls by their tangent planes (their
   // convex minorant on the cutting side). Each voxel must still hold
   // exactly clamp(-min_k d_k, -gamma, gamma), to the bit.
-  const Aabb box{Vec3(-0.3, -0.05, -0.35), Vec3(0.3, 0.3, 0)};
-  stock::StockOptions so;
-  so.voxel_mm = 0.01;
   const tool::Tool t = tool::parse_tool_spec("flycutter:swing=2,r=0.5", "test");
-  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
-  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.25, Vec3(0.1, 0.05, 1).normalized()).toRotationMatrix();
+  const Eigen::Matrix3d turned = Eigen::AngleAxisd(0.25, Vec3(0.1, 0.05, 1).normalized()).toRotationMatrix();
   std::vector<sweep::Sweep> moves;
   for (int line = 0; line < 6; ++line) {
     const double y = 0.02 + 0.04 * line, z = -0.15 - 0.01 * line;
-    moves.push_back(sweep::sweep_line(Vec3(-0.5, y, z), Vec3(0.5, y + 0.01 * line, z), line == 3 ? R : I, t));
+    moves.push_back(sweep::sweep_line(Vec3(-0.5, y, z), Vec3(0.5, y + 0.01 * line, z),
+                                      line == 3 ? turned : Eigen::Matrix3d::Identity(), t));
   }
+  const Aabb box{Vec3(-0.3, -0.05, -0.35), Vec3(0.3, 0.3, 0)};
+  stock::StockOptions so;
+  so.voxel_mm = 0.01;
   std::size_t tori = 0;
   for (const auto& m : moves) tori += m.prims.size();
   ASSERT_GT(tori, 100u);
   stock::Stock s(box, box, so);
   s.subtract(moves);
-  const double g = s.band_mm();
-  const float gf = static_cast<float>(g);
-  std::atomic<std::size_t> checked{0}, surface{0}, differ{0};
-  s.for_each_roi_block([&](const stock::VoxelBlock& vb) {
-    for (int x = 0; x < vb.n[0]; ++x)
-      for (int y = 0; y < vb.n[1]; ++y)
-        for (int z = 0; z < vb.n[2]; ++z) {
-          const Vec3 p = vb.first_center + so.voxel_mm * Vec3(x, y, z);
-          const auto want_at = brute_force_voxel(moves, box, p, g, so.voxel_mm);
-          if (!want_at) continue;  // the block's faces' band
-          const float want = *want_at;
-          const float got = vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z];
-          ++checked;
-          surface += want > -gf && want < gf;
-          differ += got != want;
-        }
-  });
-  EXPECT_GT(checked.load(), 30000u);
-  EXPECT_GT(surface.load(), 6000u);  // the cut's band, where the tori are culled
-  // (A plane 0.02 um too high, by a wrong bound, made 35 voxels differ.)
-  EXPECT_EQ(differ.load(), 0u);
+  const BruteForce bf = against_brute_force(s, moves, box, so.voxel_mm);
+  EXPECT_GT(bf.checked, 30000u);
+  EXPECT_GT(bf.surface, 6000u);  // the cut's band, where the tori are culled
+  // (A plane 0.02 um too high, by a wrong bound, made 35 voxels differ;
+  // the core-point bound without its bend, 3.)
+  EXPECT_EQ(bf.differ, 0u);
 }
 
 TEST(Volume, BlocksDeepInsideAPieceAreAiredWholeAndNoVoxelMore) {
@@ -381,32 +385,14 @@ TEST(Volume, BlocksDeepInsideAPieceAreAiredWholeAndNoVoxelMore) {
   const double v0 = s.removed_volume_mm3();
   s.subtract(moves);
   EXPECT_GE(s.stats().blocks_aired, 64u + 100u) << "no 128^3 block, or few 32^3 ones, aired whole";
-  const double g = s.band_mm();
-  const float gf = static_cast<float>(g);
-  std::atomic<std::size_t> checked{0}, air{0}, band{0}, differ{0};
-  s.for_each_roi_block([&](const stock::VoxelBlock& vb) {
-    const Vec3 lo = vb.first_center, hi = lo + h * Vec3(vb.n[0] - 1, vb.n[1] - 1, vb.n[2] - 1);
-    const bool on_x = lo.x() <= h / 2 && hi.x() >= -h / 2, on_z = lo.z() <= -3 + h / 2 && hi.z() >= -3 - h / 2;
-    if (!on_x && !on_z) return;
-    for (int x = 0; x < vb.n[0]; ++x)
-      for (int y = 0; y < vb.n[1]; ++y)
-        for (int z = 0; z < vb.n[2]; ++z) {
-          const Vec3 p = vb.first_center + h * Vec3(x, y, z);
-          if (std::fabs(p.x()) > h / 2 && std::fabs(p.z() + 3) > h / 2) continue;
-          const auto want_at = brute_force_voxel(moves, box, p, g, h);
-          if (!want_at) continue;  // the block's faces' band
-          const float want = *want_at;
-          const float got = vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z];
-          ++checked;
-          air += want == gf;
-          band += want < gf && want > -gf;
-          differ += got != want;
-        }
+  // The planes x = 0 and z = -3, within half a voxel.
+  const BruteForce bf = against_brute_force(s, moves, box, h, [h](const Vec3& lo, const Vec3& hi) {
+    return (lo.x() <= h / 2 && hi.x() >= -h / 2) || (lo.z() <= -3 + h / 2 && hi.z() >= -3 - h / 2);
   });
-  EXPECT_GT(checked.load(), 300000u);
-  EXPECT_GT(air.load(), 100000u);
-  EXPECT_GT(band.load(), 3000u);  // the cylinder's side and floor on the planes
-  EXPECT_EQ(differ.load(), 0u);
+  EXPECT_GT(bf.checked, 300000u);
+  EXPECT_GT(bf.air, 100000u);
+  EXPECT_GT(bf.surface, 3000u);  // the cylinder's side and floor on the planes
+  EXPECT_EQ(bf.differ, 0u);
   // The volume: the disc r=4.5 swept from (-0.2, 0.1) to (0.3, 0.4), within
   // the ROI (its end snapped to the voxel cells) and the box, 6 mm deep;
   // its area by midpoint sums.
