@@ -112,7 +112,7 @@ struct Visit {
     return std::max(std::max(flank, rake), std::max(-f.length - xc, p.z() - e.height));
   }
   double operator()(const SwingTorus& t) const {
-    return hypot2(hypot2(p.x(), p.z() - t.swing) - (t.swing - t.nose_radius), p.y()) - t.nose_radius;
+    return torus_at(t, p.x(), p.y(), p.z()).D - t.nose_radius;
   }
 };
 

@@ -264,23 +264,13 @@ struct Off {
 /// p less its nearest point on the hull (zero inside).
 Vec3 hull_offset(const Vec3& p, const HullPrim& h);
 
-// A fly-cutter's swing torus (tool::SwingTorus: axis the frame's Y through
-// (0, 0, swing)) at a world point x: the point in the torus's frame, its
-// distance u from the spindle axis, q = u - a with a = swing - nose
-// radius the radius of the tube's core circle, and D = hypot(q, y) the
-// distance to that circle; the torus's distance is D - nose radius.
-struct TorusAt {
-  double x, y, z, u, q, D;
-};
-[[gnu::always_inline]] inline TorusAt torus_at(const TorusPrim& tp, const Vec3& w) {
+// A fly-cutter's swing torus at a world point: the point in the torus's
+// frame and its parts there (tool::torus_at).
+[[gnu::always_inline]] inline tool::TorusAt torus_at(const TorusPrim& tp, const Vec3& w) {
   const double rx = w.x() - tp.origin.x(), ry = w.y() - tp.origin.y(), rz = w.z() - tp.origin.z();
   const Eigen::Matrix3d& m = tp.to_local;
-  const double x = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, y = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
-               z = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
-  const double s = tp.torus.swing;
-  const double u = hypot2(x, z - s);
-  const double q = u - (s - tp.torus.nose_radius);
-  return {x, y, z, u, q, hypot2(q, y)};
+  return tool::torus_at(tp.torus, m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
+                        m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz);
 }
 
 }  // namespace detail
@@ -307,7 +297,7 @@ struct TorusAt {
     // (|u - a| >= max(u - a, 0)), so H's tangent plane at x bounds the
     // distance everywhere: d(y) >= H(y) - r >= d(x) + g . (y - x). Nearer
     // the axis than a (far above the tip) the plane would not hold: no.
-    const detail::TorusAt t = detail::torus_at(*tp, x);
+    const tool::TorusAt t = detail::torus_at(*tp, x);
     if (!(t.q >= 0 && t.u > 0)) return false;
     *d = t.D - tp->torus.nose_radius;
     if (!(t.D > 0)) {

@@ -95,6 +95,20 @@ struct SwingTorus {
 
 using Shape = std::variant<RevolvedEnvelope, EdgeProfile, FlankBody, SwingTorus>;
 
+/// A point (x, y, z) in the swing torus's frame, with its distance u from
+/// the spindle axis, q = u - a (a = swing - nose radius, the radius of the
+/// tube's core circle) and D = hypot(q, y), its distance to that circle:
+/// the torus's distance is D - nose radius. Inline: the stock update
+/// measures tori per voxel.
+struct TorusAt {
+  double x, y, z, u, q, D;
+};
+inline TorusAt torus_at(const SwingTorus& t, double x, double y, double z) {
+  const double u = hypot2(x, z - t.swing);
+  const double q = u - (t.swing - t.nose_radius);
+  return {x, y, z, u, q, hypot2(q, y)};
+}
+
 /// Signed distance (mm, negative inside) from a point in the tool frame to
 /// a shape at rest. Exact for envelopes, the torus and the profile; for the
 /// flank body exact inside along the plane faces and a lower bound elsewhere.
