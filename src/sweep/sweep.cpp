@@ -10,6 +10,7 @@ namespace cutsim::sweep {
 namespace {
 
 using detail::clamp01;
+using detail::prism_sd;
 
 // p less its nearest point on the segment ab (detail::seg_offset on Vec3s).
 Vec3 seg_offset(const Vec3& p, const Vec3& a, const Vec3& b) {
@@ -25,12 +26,6 @@ double seg_dist2(double px, double py, double bx, double by) {
   return hypot2(px - t * bx, py - t * by);
 }
 
-// Signed distance of an extruded 2D region: `a` the signed in-plane distance,
-// `b` the signed distance along the extrusion axis.
-double prism_sd(double a, double b) {
-  const double ao = std::max(a, 0.0), bo = std::max(b, 0.0);
-  return std::sqrt(ao * ao + bo * bo) + std::min(std::max(a, b), 0.0);
-}
 
 // p less its nearest point on the triangle abc (by the Voronoi regions of
 // its vertices, edges and face).
@@ -184,23 +179,10 @@ LinearPrim make_linear(const Vec3& base0, const Vec3& base1, const tool::Revolve
 }
 
 double profile_distance(const ProfilePrim& pp, const Vec3& x) {
+  if (pp.prism) return detail::prism_distance(pp, x);
   const Vec3 p = pp.to_local * (x - pp.origin);
   const Vec3& d = pp.d_local;
   const tool::EdgeProfile& e = pp.edge;
-  const double ax = std::fabs(d.x());
-  if (ax > 1e-9 * std::max(d.norm(), 1e-12)) {
-    // A prism: cross-sections are the profile moved along the in-plane
-    // part of d; the side faces lean by that motion.
-    const double s = clamp01(p.x() / d.x());
-    const double y = p.y() - s * d.y(), z = p.z() - s * d.z();
-    double gy = 0, gz = 0;
-    const double a2 = tool::profile_distance_2d(e, y, z, &gy, &gz);
-    const double f2 = ax / hypot2(ax, gy * d.y() + gz * d.z());
-    const double fc = ax / hypot2(ax, d.z());
-    const double a = std::max(a2 * f2, (z - e.height) * fc);
-    const double b = d.x() > 0 ? std::max(-p.x(), p.x() - d.x()) : std::max(p.x(), d.x() - p.x());
-    return prism_sd(a, b);
-  }
   // Motion within the rake plane: a sheet of no thickness.
   const double a = golden_min([&](double s) {
     const double y = p.y() - s * d.y(), z = p.z() - s * d.z();
@@ -224,6 +206,14 @@ ProfilePrim make_profile(const Vec3& tip0, const Vec3& tip1, const tool::EdgePro
   pp.edge = edge;
   pp.edge.cos_o = 1;
   pp.edge.sin_o = 0;
+  pp.prism = std::fabs(pp.d_local.x()) > 1e-9 * std::max(pp.d_local.norm(), 1e-12);
+  pp.sin_half = std::sin(edge.half_angle);
+  pp.cos_half = std::cos(edge.half_angle);
+  const Vec3& d = pp.d_local;
+  const double ax = std::fabs(d.x());
+  pp.f_side[0] = detail::prism_factor(ax, pp.cos_half * d.y() + -pp.sin_half * d.z());
+  pp.f_side[1] = detail::prism_factor(ax, -pp.cos_half * d.y() + -pp.sin_half * d.z());
+  pp.f_top = detail::prism_factor(ax, d.z());
   const Aabb local = tool::shape_bounds(pp.edge);
   pp.bounds = world_box(local, Rl, tip0);
   pp.bounds.extend(world_box(local, Rl, tip1));
@@ -327,7 +317,7 @@ HullPrim hull_prim(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec3& p
   return hp;
 }
 
-double distance(const Primitive& p, const Vec3& x) {
+double detail::distance_out_of_line(const Primitive& p, const Vec3& x) {
   return std::visit([&](const auto& q) -> double {
     using T = std::decay_t<decltype(q)>;
     if constexpr (std::is_same_v<T, LinearPrim>) return linear_distance(q, x);

@@ -119,22 +119,8 @@ struct Visit {
 }  // namespace
 
 double profile_distance_2d(const EdgeProfile& e, double y, double z, double* gy, double* gz) {
-  const double a = std::fabs(y), b = z - e.nose_radius;
   const SinCos h = sin_cos(e.half_angle);
-  const double sb = h.s, cb = h.c;
-  double d, ga, gb;
-  if (a * sb + b * cb <= 0) {  // nearest to the apex of the wedge
-    d = hypot2(a, b);
-    ga = d > 0 ? a / d : 0;
-    gb = d > 0 ? b / d : -1;
-  } else {
-    d = a * cb - b * sb;
-    ga = cb;
-    gb = -sb;
-  }
-  if (gy) *gy = y < 0 ? -ga : ga;
-  if (gz) *gz = gb;
-  return d - e.nose_radius;
+  return profile_distance_2d(e, h.s, h.c, y, z, gy, gz);
 }
 
 double shape_distance(const Shape& s, const Vec3& p) { return std::visit(Visit{p}, s); }

@@ -52,6 +52,14 @@ struct ProfilePrim {
   Vec3 d_local;               ///< the move in local coordinates
   tool::EdgeProfile edge;     ///< orientation folded into to_local
   Aabb bounds;
+  /// The move has a part along the cutting direction (a prism, not a sheet
+  /// in the rake plane), and the edge's half angle's sine and cosine.
+  bool prism = false;
+  double sin_half = 0, cos_half = 1;
+  /// A prism's factors from in-plane to 3-D distance (detail::prism_distance),
+  /// worked out once: for the side faces (gradient (+-cos_half, -sin_half)
+  /// in the rake plane, y >= 0 and y < 0) and for the top.
+  double f_side[2] = {1, 1}, f_top = 1;
 };
 
 /// A fly-cutter's revolution at one place: the swing torus at a pose. Exact.
@@ -87,7 +95,7 @@ HullPrim hull_prim(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec3& p
 
 using Primitive = std::variant<LinearPrim, ArcPrim, ProfilePrim, TorusPrim, HullPrim>;
 
-double distance(const Primitive& p, const Vec3& x);
+inline double distance(const Primitive& p, const Vec3& x);
 const Aabb& bounds(const Primitive& p);
 /// True when the piece's distance is 1-Lipschitz inside as well as outside
 /// (|d(x) - d(y)| <= |x - y| everywhere), so a value at one point bounds it
@@ -273,7 +281,55 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
                         m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz);
 }
 
+// Signed distance of an extruded 2D region: `a` the signed in-plane distance,
+// `b` the signed distance along the extrusion axis.
+[[gnu::always_inline]] inline double prism_sd(double a, double b) {
+  const double ao = std::max(a, 0.0), bo = std::max(b, 0.0);
+  return std::sqrt(ao * ao + bo * bo) + std::min(std::max(a, b), 0.0);
+}
+
+// The factor from a prism's in-plane distance to its 3-D one, for a face
+// whose in-plane gradient g meets the move d (ax = |d.x|, gd = g . d).
+[[gnu::always_inline]] inline double prism_factor(double ax, double gd) { return ax / hypot2(ax, gd); }
+
+// A profile prism's distance (ProfilePrim::prism): the cross-section at
+// the point's place along the cutting direction is the profile moved along
+// the in-plane part of the move; the side faces lean by that motion, so the
+// in-plane distance is scaled by the lean of the nearest face.
+[[gnu::always_inline]] inline double prism_distance(const ProfilePrim& pp, const Vec3& w) {
+  const double rx = w.x() - pp.origin.x(), ry = w.y() - pp.origin.y(), rz = w.z() - pp.origin.z();
+  const Eigen::Matrix3d& m = pp.to_local;
+  const double px = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, py = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
+               pz = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
+  const Vec3& d = pp.d_local;
+  const tool::EdgeProfile& e = pp.edge;
+  const double ax = std::fabs(d.x());
+  const double s = clamp01(px / d.x());
+  const double y = py - s * d.y(), z = pz - s * d.z();
+  double gy = 0, gz = 0;
+  const double a2 = tool::profile_distance_2d(e, pp.sin_half, pp.cos_half, y, z, &gy, &gz);
+  // (A side face's factor is the piece's: the same arithmetic on the same
+  // gradient, done once. Near the apex the gradient turns with the point.)
+  const double f2 = gz == -pp.sin_half && gy == pp.cos_half    ? pp.f_side[0]
+                    : gz == -pp.sin_half && gy == -pp.cos_half ? pp.f_side[1]
+                                                               : prism_factor(ax, gy * d.y() + gz * d.z());
+  const double a = std::max(a2 * f2, (z - e.height) * pp.f_top);
+  const double b = d.x() > 0 ? std::max(-px, px - d.x()) : std::max(px, d.x() - px);
+  // prism_sd(a, b), without its root where b <= 0 (inside the piece's
+  // length): sqrt(a * a) is a to the bit (round to nearest), above 1e-150.
+  if (b <= 0 && !(a > 0 && a < 1e-150)) return (a > 0 ? a : 0.0) + std::min(std::max(a, b), 0.0);
+  return prism_sd(a, b);
+}
+
+/// Every other piece's distance (out of line).
+double distance_out_of_line(const Primitive& p, const Vec3& x);
+
 }  // namespace detail
+
+[[gnu::always_inline]] inline double distance(const Primitive& p, const Vec3& x) {
+  if (const auto* pp = std::get_if<ProfilePrim>(&p); pp && pp->prism) return detail::prism_distance(*pp, x);
+  return detail::distance_out_of_line(p, x);
+}
 
 /// A fly-cutter torus's distance (what `distance` gives for it).
 [[gnu::always_inline]] inline double torus_distance(const TorusPrim& tp, const Vec3& x) {

@@ -9,6 +9,7 @@
 // in their cutting direction, the tool frame's +X turned about +Z by
 // `orientation_deg`; their rake face faces the cutting direction and their
 // body lies behind it.
+#include <cmath>
 #include <map>
 #include <string>
 #include <variant>
@@ -124,6 +125,25 @@ Aabb shape_bounds_below(const Shape& s, double top);
 /// Signed distance in the rake plane to the edge profile Q (no height cap):
 /// negative inside. Also gives the unit outward gradient (gy, gz).
 double profile_distance_2d(const EdgeProfile& e, double y, double z, double* gy = nullptr, double* gz = nullptr);
+/// The same, given sin and cos of the half angle (sb, cb): inline, for the
+/// stock update's V prisms, which take them from the piece.
+[[gnu::always_inline]] inline double profile_distance_2d(const EdgeProfile& e, double sb, double cb, double y,
+                                                         double z, double* gy, double* gz) {
+  const double a = std::fabs(y), b = z - e.nose_radius;
+  double d, ga, gb;
+  if (a * sb + b * cb <= 0) {  // nearest to the apex of the wedge
+    d = hypot2(a, b);
+    ga = d > 0 ? a / d : 0;
+    gb = d > 0 ? b / d : -1;
+  } else {
+    d = a * cb - b * sb;
+    ga = cb;
+    gb = -sb;
+  }
+  if (gy) *gy = y < 0 ? -ga : ga;
+  if (gz) *gz = gb;
+  return d - e.nose_radius;
+}
 
 struct Region {
   std::string name;  ///< "clearance-face", "neck", "shank", "holder"
