@@ -494,4 +494,47 @@ TEST(Sweep, VToolPlaningPrismIsOneLipschitz) {
   EXPECT_FALSE(sweep::lipschitz(side.prims[0]));
 }
 
+TEST(Sweep, VToolPrismIsItsPlanesInsideAndTheExtrusionOfItsSectionOutside) {
+  // A 60 deg V tool lowering by 1 in 8 along its cutting direction: the
+  // piece is a prism whose sides lean by the motion. Inside, its distance
+  // is the largest of its five planes' (two sides, top, two ends), here
+  // worked out from the geometry; the piece gives its side and top
+  // factors once, and a wrong one shows as a different value.
+  const double H = 0.05, L = 0.02, dz = -0.0025;
+  const tool::Tool t = tool::parse_tool_spec("vtool:angle=60,h=0.05", "test");
+  const sweep::Sweep s = sweep::sweep_line(Vec3(0, 0, 0), Vec3(L, 0, dz), Eigen::Matrix3d::Identity(), t);
+  ASSERT_EQ(s.prims.size(), 1u);
+  const double k = dz / L, sh = 0.5, ch = std::sqrt(0.75);  // sin and cos of the half angle
+  const double side_n = std::sqrt(1 + k * k * sh * sh), top_n = std::sqrt(1 + k * k);
+  auto planes = [&](const Vec3& p) {
+    const double zp = p.z() - k * p.x();  // height above the tip's path
+    const double side = (std::fabs(p.y()) * ch - zp * sh) / side_n;
+    const double top = (zp - H) / top_n;
+    return std::max({side, top, -p.x(), p.x() - L});
+  };
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> ux(-0.005, 0.025), uy(-0.03, 0.03), uz(-0.01, 0.06);
+  int inside = 0, outside = 0;
+  for (int i = 0; i < 100000; ++i) {
+    const Vec3 p(ux(rng), uy(rng), uz(rng));
+    const double d = sweep::distance(s.prims[0], p), want = planes(p);
+    if (want < 0) {
+      ++inside;
+      EXPECT_NEAR(d, want, 1e-15) << p.transpose();
+    } else if (const double along = std::fabs(p.y()) * sh + (p.z() - k * p.x()) * ch;
+               p.x() > 0 && p.x() < L && along > 0 && along < H / ch) {
+      // Beside a side face (between the normals at its ends, the apex and
+      // the top corner) and within the piece's length: the side plane's.
+      ++outside;
+      EXPECT_NEAR(d, want, 1e-15) << p.transpose();
+    }
+  }
+  EXPECT_GT(inside, 10000);
+  EXPECT_GT(outside, 10000);
+  // Level (no lean): below the tip the nearest point is on its path.
+  const sweep::Sweep level = sweep::sweep_line(Vec3(0, 0, 0), Vec3(L, 0, 0), Eigen::Matrix3d::Identity(), t);
+  EXPECT_NEAR(sweep::distance(level.prims[0], Vec3(0.01, 0.001, -0.002)), std::hypot(0.001, 0.002), 1e-15);
+  EXPECT_NEAR(sweep::distance(level.prims[0], Vec3(L + 0.003, 0, 0.01)), 0.003, 1e-15);
+}
+
 }  // namespace cutsim::test
