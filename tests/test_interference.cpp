@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 #include <set>
 #include <sstream>
 
@@ -118,6 +119,27 @@ TEST(Interference, VToolRasterLeavesClosedFormCuspsAndNoFlankContact) {
   }
   const double cusp = tops / nt - bottoms / nb;
   EXPECT_NEAR(cusp, pick / 2 / std::tan(kPi / 4), 0.8 * h);
+}
+
+// The contact check measures a flank body with its angles' sines worked
+// out once per pose: the same values as shape_distance, to the bit.
+TEST(Interference, FlankBodyWithItsSinesWorkedOutOnceIsTheShapesDistance) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.3, 0.3);
+  int flanks = 0;
+  for (const char* spec : {"vtool:angle=90,clearance=7,h=0.1,body=0.3", "nose:r=0.5,clearance=5"}) {
+    for (const tool::Region& rg : tool::contact_regions(tool::parse_tool_spec(spec, "test"))) {
+      const auto* f = std::get_if<tool::FlankBody>(&rg.shape);
+      if (!f) continue;
+      ++flanks;
+      const tool::FlankTrig trig = tool::flank_trig(*f);
+      for (int i = 0; i < 20000; ++i) {
+        const Vec3 p(u(rng), u(rng), u(rng) + 0.2);
+        ASSERT_EQ(tool::flank_distance(*f, trig, p), tool::shape_distance(rg.shape, p)) << spec << " " << p.transpose();
+      }
+    }
+  }
+  EXPECT_EQ(flanks, 2);
 }
 
 TEST(Interference, ShankContactWhereABallMillPlungesPastItsFlutes) {

@@ -98,12 +98,19 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
       if (!boxes[i].overlaps(reach)) continue;
       const tool::Shape& shape = regions[i].shape;
       const sweep::Sweep& sw = sweeps[i];
+      // (A flank body with its angles' sines worked out once for the pose.)
+      const auto* flank = std::get_if<tool::FlankBody>(&shape);
+      const tool::FlankTrig trig = flank ? tool::flank_trig(*flank) : tool::FlankTrig{};
       auto overlap = [&](const std::function<double(const Vec3&, double)>& removed) {
-        return sw.prims.empty()
-                   ? stock_.overlap(boxes[i],
-                                    [&, inv = at[i].inverse()](const Vec3& x) { return tool::shape_distance(shape, inv * x); },
-                                    removed, tol_)
-                   : stock_.overlap(boxes[i], [&](const Vec3& x) { return sw.distance(x); }, removed, tol_);
+        if (!sw.prims.empty())
+          return stock_.overlap(boxes[i], [&](const Vec3& x) { return sw.distance(x); }, removed, tol_);
+        if (flank)
+          return stock_.overlap(
+              boxes[i], [&, inv = at[i].inverse()](const Vec3& x) { return tool::flank_distance(*flank, trig, inv * x); },
+              removed, tol_);
+        return stock_.overlap(boxes[i],
+                              [&, inv = at[i].inverse()](const Vec3& x) { return tool::shape_distance(shape, inv * x); },
+                              removed, tol_);
       };
       stock::Overlap ov = overlap(so_far.prims.empty() ? nullptr : std::function<double(const Vec3&, double)>(so_far_d));
       // The batch's pending cuts only take material away: without a

@@ -102,14 +102,8 @@ struct Visit {
     return hypot2(xc, std::max(a, 0.0));
   }
   double operator()(const FlankBody& f) const {
-    const EdgeProfile& e = f.edge;
-    const double xc = e.cos_o * p.x() + e.sin_o * p.y();
-    const double yc = -e.sin_o * p.x() + e.cos_o * p.y();
-    const SinCos cl = sin_cos(f.clearance);
-    const double flank = profile_distance_2d(e, yc, p.z()) * cl.c - xc * cl.s;
-    const SinCos rk = sin_cos(f.rake);
-    const double rake = xc * rk.c + p.z() * rk.s;
-    return std::max(std::max(flank, rake), std::max(-f.length - xc, p.z() - e.height));
+    const SinCos h = sin_cos(f.edge.half_angle), cl = sin_cos(f.clearance), rk = sin_cos(f.rake);
+    return flank_distance(f, FlankTrig{h.s, h.c, cl.s, cl.c, rk.s, rk.c}, p);
   }
   double operator()(const SwingTorus& t) const {
     return torus_at(t, p.x(), p.y(), p.z()).D - t.nose_radius;
@@ -117,6 +111,11 @@ struct Visit {
 };
 
 }  // namespace
+
+FlankTrig flank_trig(const FlankBody& f) {
+  return {std::sin(f.edge.half_angle), std::cos(f.edge.half_angle), std::sin(f.clearance),
+          std::cos(f.clearance),       std::sin(f.rake),            std::cos(f.rake)};
+}
 
 double profile_distance_2d(const EdgeProfile& e, double y, double z, double* gy, double* gz) {
   const SinCos h = sin_cos(e.half_angle);
