@@ -1207,7 +1207,8 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
                                     : static_cast<double>(tile);
                   if (-mat <= floor) continue;
                   const Vec3 p = m.origin + m.h * Vec3(x, y, z);
-                  if (-rq + (p - cq).norm() <= floor) continue;
+                  // -rq + |p - cq| <= floor, on squared lengths (no root per voxel).
+                  if (const double reach = rq + floor; reach >= 0 && (p - cq).squaredNorm() <= reach * reach) continue;
                   const double rg = region(p);
                   if (-rg <= floor) continue;
                   if (removed) {
@@ -1320,10 +1321,14 @@ void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn,
         if (b.uniform) {
           b.value = acc.getValue(lo);
         } else {
+          // From the leaf's buffer (its voxels x-major like the block's), not
+          // voxel by voxel through getValue.
+          const float* data = leaf->buffer().data();
+          const Coord d = lo - leaf->origin();
           for (int x = 0; x < b.n[0]; ++x)
             for (int y = 0; y < b.n[1]; ++y)
               for (int z = 0; z < b.n[2]; ++z)
-                b.values[(x * 8 + y) * 8 + z] = leaf->getValue(lo + Coord(x, y, z));
+                b.values[(x * 8 + y) * 8 + z] = data[((d.x() + x) << 6) | ((d.y() + y) << 3) | (d.z() + z)];
         }
       }
       fn(b);
