@@ -851,7 +851,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               if (dk - hq * gl.cwiseAbs().sum() >= need_max) continue;
               seed_d[k] = dk;
             } else {
-              dk = sweep::distance(*cand[k], cb);
+              dk = sweep::distance_inline(*cand[k], cb);
               seed_d[k] = std::numeric_limits<double>::quiet_NaN();
             }
             const double key = bounded_key(dk, *cand[k]);
@@ -875,7 +875,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           // would write, without a distance per voxel). The old surface's
           // band under a cut is mostly such quarters.
           if (const sweep::Primitive& p0 = *cand[sub[0].second];
-              sweep::lipschitz(p0) && sweep::distance(p0, cb) + hd_sub <= -g - 1e-6 * h) {
+              sweep::lipschitz(p0) && sweep::distance_inline(p0, cb) + hd_sub <= -g - 1e-6 * h) {
             for (int ix = bx; ix < bx + 4; ++ix)
               for (int iy = by; iy < by + 4; ++iy)
                 for (int iz = bz; iz < bz + 4; ++iz) {
@@ -950,12 +950,12 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
                   Near& n = near[j];
                   double dj;
                   if (!reuse) {
-                    dj = sweep::distance(*n.prim, p);
+                    dj = sweep::distance_inline(*n.prim, p);
                   } else if (sweep::convex_distance(*n.prim, p, &dj, &n.grad)) {
                     n.bound = Near::plane;
                     n.c = dj - n.grad.dot(y);
                   } else {
-                    dj = sweep::distance(*n.prim, p);
+                    dj = sweep::distance_inline(*n.prim, p);
                     n.bound = Near::cone;
                     n.c = dj;
                     n.at = y;

@@ -317,7 +317,7 @@ HullPrim hull_prim(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec3& p
   return hp;
 }
 
-double detail::distance_out_of_line(const Primitive& p, const Vec3& x) {
+double distance(const Primitive& p, const Vec3& x) {
   return std::visit([&](const auto& q) -> double {
     using T = std::decay_t<decltype(q)>;
     if constexpr (std::is_same_v<T, LinearPrim>) return linear_distance(q, x);

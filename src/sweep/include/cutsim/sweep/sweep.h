@@ -95,7 +95,11 @@ HullPrim hull_prim(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec3& p
 
 using Primitive = std::variant<LinearPrim, ArcPrim, ProfilePrim, TorusPrim, HullPrim>;
 
-inline double distance(const Primitive& p, const Vec3& x);
+double distance(const Primitive& p, const Vec3& x);
+/// The same, with a profile prism's inlined: for the stock update's voxel
+/// loop, where V tools spend their time (elsewhere, as in the binning's
+/// loops, the inlined code only crowds out what the compiler inlines there).
+inline double distance_inline(const Primitive& p, const Vec3& x);
 const Aabb& bounds(const Primitive& p);
 /// True when the piece's distance is 1-Lipschitz inside as well as outside
 /// (|d(x) - d(y)| <= |x - y| everywhere), so a value at one point bounds it
@@ -321,14 +325,11 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   return prism_sd(a, b);
 }
 
-/// Every other piece's distance (out of line).
-double distance_out_of_line(const Primitive& p, const Vec3& x);
-
 }  // namespace detail
 
-[[gnu::always_inline]] inline double distance(const Primitive& p, const Vec3& x) {
+[[gnu::always_inline]] inline double distance_inline(const Primitive& p, const Vec3& x) {
   if (const auto* pp = std::get_if<ProfilePrim>(&p); pp && pp->prism) return detail::prism_distance(*pp, x);
-  return detail::distance_out_of_line(p, x);
+  return distance(p, x);
 }
 
 /// A fly-cutter torus's distance (what `distance` gives for it).
