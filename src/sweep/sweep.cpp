@@ -341,8 +341,7 @@ bool lipschitz(const Primitive& p) {
     // leans the two sides differently (a jump inside, on the bisector); a
     // round nose leans its tangent planes differently too.
     const Vec3& d = pp->d_local;
-    return pp->edge.nose_radius == 0 && std::fabs(d.x()) > 1e-9 * std::max(d.norm(), 1e-12) &&
-           std::fabs(d.y()) <= 1e-12 * d.norm();
+    return pp->edge.nose_radius == 0 && pp->prism && std::fabs(d.y()) <= 1e-12 * d.norm();
   }
   return true;
 }
