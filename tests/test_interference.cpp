@@ -142,6 +142,100 @@ TEST(Interference, FlankBodyWithItsSinesWorkedOutOnceIsTheShapesDistance) {
   EXPECT_EQ(flanks, 2);
 }
 
+// The contact scan bounds a quarter's voxels by the flank body's tangent
+// plane at its centre: the plane must lie below the body's distance
+// everywhere (the body is convex), and the value must be flank_distance's.
+TEST(Interference, FlankBodysTangentPlaneLiesBelowItsDistance) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-0.3, 0.3);
+  int flanks = 0, kinks = 0;
+  std::set<int> terms;  // which of the four terms were largest at x
+  for (const char* spec : {"vtool:angle=90,clearance=7,h=0.1,body=0.3", "vtool:angle=60,clearance=12,h=0.05,body=0.2",
+                           "nose:r=0.5,clearance=5"}) {
+    for (const tool::Region& rg : tool::contact_regions(tool::parse_tool_spec(spec, "test"))) {
+      const auto* f = std::get_if<tool::FlankBody>(&rg.shape);
+      if (!f) continue;
+      ++flanks;
+      const tool::FlankTrig trig = tool::flank_trig(*f);
+      for (int i = 0; i < 4000; ++i) {
+        const Vec3 x(u(rng), u(rng), u(rng) + 0.1);
+        Vec3 g = Vec3::Constant(std::nan(""));
+        const double dx = tool::flank_distance(*f, trig, x, &g);
+        ASSERT_EQ(dx, tool::flank_distance(*f, trig, x));
+        ASSERT_LE(g.norm(), 1 + 1e-12);
+        const Vec3 dxc(f->edge.cos_o, f->edge.sin_o, 0);
+        terms.insert(g == Vec3::UnitZ()                                    ? 0   // top
+                     : g == -dxc                                           ? 1   // back end
+                     : g == Vec3(trig.c_rake * dxc + trig.s_rake * Vec3::UnitZ()) ? 2   // rake face
+                                                                           : 3);  // flank
+        // Near x (the scan's quarters) and far from it.
+        for (int j = 0; j < 25; ++j) {
+          const double r = j % 2 ? 0.002 : 0.3;
+          const Vec3 y = x + r * Vec3(u(rng), u(rng), u(rng));
+          ASSERT_GE(tool::flank_distance(*f, trig, y) + 1e-13, dx + g.dot(y - x))
+              << spec << " at " << x.transpose() << " to " << y.transpose();
+        }
+        // And it is that term's gradient: along g a small step raises the
+        // distance by |g|^2 times the step, up to the kinks.
+        const double e = 1e-7;
+        const double fd = (tool::flank_distance(*f, trig, x + e * g) - dx) / e;
+        if (std::fabs(fd - g.squaredNorm()) > 1e-4) ++kinks;  // a kink within 1e-7 of x: rare
+      }
+    }
+  }
+  EXPECT_EQ(flanks, 3);
+  EXPECT_LT(kinks, 12);
+  EXPECT_EQ(terms.size(), 4u) << "each of the four terms largest somewhere";
+}
+
+// With the region's tangent plane (a convex region), the scan passes over
+// voxels without evaluating it, and must find the same deepest overlap.
+TEST(Interference, OverlapWithTheRegionsTangentPlaneIsTheSame) {
+  const Aabb box{Vec3(-1, -1, -0.5), Vec3(1, 1, 0)};
+  stock::StockOptions so;
+  so.voxel_mm = 0.005;
+  stock::Stock s(box, box, so);
+  // Grooves planed by a V tool leave cusps for the flank body to touch.
+  const tool::Tool vt = tool::parse_tool_spec("vtool:angle=90,clearance=7,h=0.1,body=0.3", "test");
+  for (int k = 0; k < 5; ++k) {
+    const double y = -0.1 + 0.04 * k;
+    s.subtract(sweep::sweep_line(Vec3(-0.8, y, -0.01), Vec3(0.8, y, -0.01), Eigen::Matrix3d::Identity(), vt));
+  }
+  const tool::FlankBody* f = nullptr;
+  const auto regions = tool::contact_regions(vt);
+  for (const tool::Region& rg : regions)
+    if ((f = std::get_if<tool::FlankBody>(&rg.shape))) break;
+  ASSERT_NE(f, nullptr);
+  const tool::FlankTrig trig = tool::flank_trig(*f);
+  int touched = 0;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int i = 0; i < 40; ++i) {
+    // Poses along and across the grooves, turned about Z and tilted.
+    Pose pose = Pose::Identity();
+    pose.translate(Vec3(0.5 * u(rng), 0.12 * u(rng), -0.012 + 0.004 * u(rng)));
+    pose.rotate(Eigen::AngleAxisd(0.3 * u(rng), Vec3::UnitZ()) * Eigen::AngleAxisd(0.05 * u(rng), Vec3::UnitY()));
+    const Pose inv = pose.inverse();
+    auto region = [&](const Vec3& x) { return tool::flank_distance(*f, trig, inv * x); };
+    auto plane = [&](const Vec3& x, Vec3* g) {
+      Vec3 gl;
+      const double d = tool::flank_distance(*f, trig, inv * x, &gl);
+      *g = pose.linear() * gl;
+      return d;
+    };
+    const Aabb bounds = sweep::world_box(tool::shape_bounds(tool::Shape(*f)),
+                                         pose.linear(), pose.translation());
+    const stock::Overlap a = s.overlap(bounds, region, nullptr, 0.0);
+    const stock::Overlap b = s.overlap(bounds, region, nullptr, 0.0, plane);
+    EXPECT_EQ(a.depth_mm, b.depth_mm) << "pose " << i;
+    EXPECT_EQ(a.where, b.where) << "pose " << i;
+    EXPECT_EQ(a.at_least, b.at_least);
+    touched += a.depth_mm > 0;
+  }
+  EXPECT_GT(touched, 10);
+  EXPECT_LT(touched, 40);
+}
+
 TEST(Interference, ShankContactWhereABallMillPlungesPastItsFlutes) {
   TempDir dir;
   // Flutes 1 mm long, a 3 mm shank above them: plunging 1.5 mm buries the

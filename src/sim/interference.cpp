@@ -104,10 +104,18 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
       auto overlap = [&](const std::function<double(const Vec3&, double)>& removed) {
         if (!sw.prims.empty())
           return stock_.overlap(boxes[i], [&](const Vec3& x) { return sw.distance(x); }, removed, tol_);
-        if (flank)
+        if (flank) {  // convex: its tangent plane bounds the scan's quarters
+          const Pose inv = at[i].inverse();
+          const Eigen::Matrix3d rot = at[i].linear();  // the body's gradient into the workpiece frame
           return stock_.overlap(
-              boxes[i], [&, inv = at[i].inverse()](const Vec3& x) { return tool::flank_distance(*flank, trig, inv * x); },
-              removed, tol_);
+              boxes[i], [&](const Vec3& x) { return tool::flank_distance(*flank, trig, inv * x); }, removed, tol_,
+              [&](const Vec3& x, Vec3* g) {
+                Vec3 gl;
+                const double d = tool::flank_distance(*flank, trig, inv * x, &gl);
+                *g = rot * gl;
+                return d;
+              });
+        }
         return stock_.overlap(boxes[i],
                               [&, inv = at[i].inverse()](const Vec3& x) { return tool::shape_distance(shape, inv * x); },
                               removed, tol_);

@@ -1117,7 +1117,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
 }
 
 Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3&)>& region,
-                       const std::function<double(const Vec3&, double)>& removed, double min_depth_mm) const {
+                       const std::function<double(const Vec3&, double)>& removed, double min_depth_mm,
+                       const std::function<double(const Vec3&, Vec3*)>& region_plane) const {
   const Impl& m = *impl_;
   Overlap best;
   const Aabb wb = bounds.intersected(m.box.expanded(m.h));
@@ -1127,6 +1128,9 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   if (bb.empty()) return best;
   const double hd0 = std::sqrt(3.0) * 0.5 * (kLeafDim - 1) * m.h;
   const double hq = std::sqrt(3.0) * 1.5 * m.h;  // 4^3 quarter: centre to its farthest voxel
+  // What a convex region's plane is lowered by (its values are some 1e-16
+  // mm off in rounding; a voxel is 1e-4 mm or more).
+  constexpr double kPlaneMargin = 1e-12;  // mm
   const auto& tree = m.grid->tree();
   // Blocks the region can reach (its distance is a lower bound outside),
   // skipping air tiles; with the region's distance at their centre.
@@ -1198,8 +1202,16 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
               // bound weaker).
               if (-static_cast<double>(quarter_min(data, qx, qy, qz)) <= floor) continue;
             }
-            const double rq = region(cq);
+            // A convex region: its plane at the centre, lowered by a margin
+            // for rounding, bounds it at every voxel (far tighter than the
+            // cone where the quarter straddles a face: the voxels beyond
+            // the face are passed over); at the quarter's lowest, the whole.
+            Vec3 gq = Vec3::Zero();
+            const double rq = region_plane ? region_plane(cq, &gq) : region(cq);
+            const bool plane = static_cast<bool>(region_plane);
+            const double rq_low = rq - kPlaneMargin;
             if (-rq + hq <= floor) continue;
+            if (plane && -(rq_low - 1.5 * m.h * gq.cwiseAbs().sum()) <= floor) continue;
             for (int x = qb.min().x(); x <= qb.max().x(); ++x)
               for (int y = qb.min().y(); y <= qb.max().y(); ++y)
                 for (int z = qb.min().z(); z <= qb.max().z(); ++z) {
@@ -1209,6 +1221,7 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
                   const Vec3 p = m.origin + m.h * Vec3(x, y, z);
                   // -rq + |p - cq| <= floor, on squared lengths (no root per voxel).
                   if (const double reach = rq + floor; reach >= 0 && (p - cq).squaredNorm() <= reach * reach) continue;
+                  if (plane && -(rq_low + gq.dot(p - cq)) <= floor) continue;
                   const double rg = region(p);
                   if (-rg <= floor) continue;
                   if (removed) {

@@ -128,8 +128,13 @@ public:
   /// most `floor` once it knows the distance is no more than that (such a
   /// voxel cannot count). Only depths above `min_depth_mm` count. The
   /// stock's values are clamped to the band, so depths stop at its half width.
+  /// `region_plane` (may be empty) is for a convex region: it returns
+  /// region(x) and sets a subgradient g, so region(y) >= region(x) + g . (y -
+  /// x) everywhere; each 4^3 quarter's voxels are then bounded by that plane
+  /// at its centre (the same result, fewer evaluations of `region`).
   Overlap overlap(const Aabb& bounds, const std::function<double(const Vec3&)>& region,
-                  const std::function<double(const Vec3&, double)>& removed, double min_depth_mm) const;
+                  const std::function<double(const Vec3&, double)>& removed, double min_depth_mm,
+                  const std::function<double(const Vec3&, Vec3*)>& region_plane = nullptr) const;
 
   /// Level-set value at a world point (trilinear), mm.
   double sample(const Vec3& p) const;

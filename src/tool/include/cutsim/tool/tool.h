@@ -153,13 +153,33 @@ FlankTrig flank_trig(const FlankBody& f);
 /// A flank body's distance given its angles' sines and cosines: what
 /// shape_distance gives for it, to the bit. Inline, with the sines worked
 /// out once: the contact check measures one body at thousands of voxels a pose.
-[[gnu::always_inline]] inline double flank_distance(const FlankBody& f, const FlankTrig& t, const Vec3& p) {
+///
+/// The distance is convex: the largest of three planes (rake face, back
+/// end, top) and the flank term, the edge profile's signed distance in the
+/// rake plane (convex: the profile is) scaled by cos(clearance) > 0 less a
+/// linear term. With `g`, also sets a subgradient there (the largest
+/// term's gradient; the profile's outward unit gradient in its apex
+/// region), so distance(q) >= distance(p) + g . (q - p) for every q.
+[[gnu::always_inline]] inline double flank_distance(const FlankBody& f, const FlankTrig& t, const Vec3& p,
+                                                    Vec3* g = nullptr) {
   const EdgeProfile& e = f.edge;
   const double xc = e.cos_o * p.x() + e.sin_o * p.y();
   const double yc = -e.sin_o * p.x() + e.cos_o * p.y();
-  const double flank = profile_distance_2d(e, t.s_half, t.c_half, yc, p.z(), nullptr, nullptr) * t.c_clear - xc * t.s_clear;
+  double gy = 0, gz = 0;
+  const double flank =
+      profile_distance_2d(e, t.s_half, t.c_half, yc, p.z(), g ? &gy : nullptr, g ? &gz : nullptr) * t.c_clear -
+      xc * t.s_clear;
   const double rake = xc * t.c_rake + p.z() * t.s_rake;
-  return std::max(std::max(flank, rake), std::max(-f.length - xc, p.z() - e.height));
+  const double d = std::max(std::max(flank, rake), std::max(-f.length - xc, p.z() - e.height));
+  if (g) {
+    // d/dp of xc is (cos_o, sin_o, 0), of yc (-sin_o, cos_o, 0).
+    const Vec3 dxc(e.cos_o, e.sin_o, 0), dyc(-e.sin_o, e.cos_o, 0);
+    if (d == flank) *g = t.c_clear * (gy * dyc + gz * Vec3::UnitZ()) - t.s_clear * dxc;
+    else if (d == rake) *g = t.c_rake * dxc + t.s_rake * Vec3::UnitZ();
+    else if (d == -f.length - xc) *g = -dxc;
+    else *g = Vec3::UnitZ();
+  }
+  return d;
 }
 
 struct Region {
