@@ -123,19 +123,26 @@ TEST(Interference, VToolRasterLeavesClosedFormCuspsAndNoFlankContact) {
 
 // The contact check measures a flank body with its angles' sines worked
 // out once per pose: the same values as shape_distance, to the bit.
+// The flank (clearance) bodies among a tool's contact regions.
+std::vector<tool::FlankBody> flank_bodies(const char* spec) {
+  std::vector<tool::FlankBody> out;
+  for (const tool::Region& rg : tool::contact_regions(tool::parse_tool_spec(spec, "test")))
+    if (const auto* f = std::get_if<tool::FlankBody>(&rg.shape)) out.push_back(*f);
+  return out;
+}
+
 TEST(Interference, FlankBodyWithItsSinesWorkedOutOnceIsTheShapesDistance) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(-0.3, 0.3);
   int flanks = 0;
   for (const char* spec : {"vtool:angle=90,clearance=7,h=0.1,body=0.3", "nose:r=0.5,clearance=5"}) {
-    for (const tool::Region& rg : tool::contact_regions(tool::parse_tool_spec(spec, "test"))) {
-      const auto* f = std::get_if<tool::FlankBody>(&rg.shape);
-      if (!f) continue;
+    for (const tool::FlankBody& fb : flank_bodies(spec)) {
+      const tool::FlankBody* f = &fb;
       ++flanks;
       const tool::FlankTrig trig = tool::flank_trig(*f);
       for (int i = 0; i < 20000; ++i) {
         const Vec3 p(u(rng), u(rng), u(rng) + 0.2);
-        ASSERT_EQ(tool::flank_distance(*f, trig, p), tool::shape_distance(rg.shape, p)) << spec << " " << p.transpose();
+        ASSERT_EQ(tool::flank_distance(*f, trig, p), tool::shape_distance(tool::Shape(fb), p)) << spec << " " << p.transpose();
       }
     }
   }
@@ -152,9 +159,8 @@ TEST(Interference, FlankBodysTangentPlaneLiesBelowItsDistance) {
   std::set<int> terms;  // which of the four terms were largest at x
   for (const char* spec : {"vtool:angle=90,clearance=7,h=0.1,body=0.3", "vtool:angle=60,clearance=12,h=0.05,body=0.2",
                            "nose:r=0.5,clearance=5"}) {
-    for (const tool::Region& rg : tool::contact_regions(tool::parse_tool_spec(spec, "test"))) {
-      const auto* f = std::get_if<tool::FlankBody>(&rg.shape);
-      if (!f) continue;
+    for (const tool::FlankBody& fb : flank_bodies(spec)) {
+      const tool::FlankBody* f = &fb;
       ++flanks;
       const tool::FlankTrig trig = tool::flank_trig(*f);
       for (int i = 0; i < 4000; ++i) {
@@ -201,11 +207,9 @@ TEST(Interference, OverlapWithTheRegionsTangentPlaneIsTheSame) {
     const double y = -0.1 + 0.04 * k;
     s.subtract(sweep::sweep_line(Vec3(-0.8, y, -0.01), Vec3(0.8, y, -0.01), Eigen::Matrix3d::Identity(), vt));
   }
-  const tool::FlankBody* f = nullptr;
-  const auto regions = tool::contact_regions(vt);
-  for (const tool::Region& rg : regions)
-    if ((f = std::get_if<tool::FlankBody>(&rg.shape))) break;
-  ASSERT_NE(f, nullptr);
+  const std::vector<tool::FlankBody> bodies = flank_bodies("vtool:angle=90,clearance=7,h=0.1,body=0.3");
+  ASSERT_EQ(bodies.size(), 1u);
+  const tool::FlankBody* f = &bodies[0];
   const tool::FlankTrig trig = tool::flank_trig(*f);
   int touched = 0;
   std::mt19937 rng(3);

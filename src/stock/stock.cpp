@@ -1131,6 +1131,7 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   // What a convex region's plane is lowered by (its values are some 1e-16
   // mm off in rounding; a voxel is 1e-4 mm or more).
   constexpr double kPlaneMargin = 1e-12;  // mm
+  const bool plane = static_cast<bool>(region_plane);
   const auto& tree = m.grid->tree();
   // Blocks the region can reach (its distance is a lower bound outside),
   // skipping air tiles; with the region's distance at their centre.
@@ -1208,7 +1209,6 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
             // the face are passed over); at the quarter's lowest, the whole.
             Vec3 gq = Vec3::Zero();
             const double rq = region_plane ? region_plane(cq, &gq) : region(cq);
-            const bool plane = static_cast<bool>(region_plane);
             const double rq_low = rq - kPlaneMargin;
             if (-rq + hq <= floor) continue;
             if (plane && -(rq_low - 1.5 * m.h * gq.cwiseAbs().sum()) <= floor) continue;
@@ -1219,9 +1219,15 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
                                     : static_cast<double>(tile);
                   if (-mat <= floor) continue;
                   const Vec3 p = m.origin + m.h * Vec3(x, y, z);
-                  // -rq + |p - cq| <= floor, on squared lengths (no root per voxel).
-                  if (const double reach = rq + floor; reach >= 0 && (p - cq).squaredNorm() <= reach * reach) continue;
-                  if (plane && -(rq_low + gq.dot(p - cq)) <= floor) continue;
+                  // The plane where there is one (a subgradient's length is
+                  // at most 1, so it is never below the cone by more than
+                  // the margin); else the cone -rq + |p - cq| <= floor, on
+                  // squared lengths (no root per voxel).
+                  if (plane) {
+                    if (-(rq_low + gq.dot(p - cq)) <= floor) continue;
+                  } else if (const double reach = rq + floor; reach >= 0 && (p - cq).squaredNorm() <= reach * reach) {
+                    continue;
+                  }
                   const double rg = region(p);
                   if (-rg <= floor) continue;
                   if (removed) {
