@@ -359,6 +359,40 @@ TEST(Interference, DeepestPointIsTheSameWhateverTheThreads) {
   }
 }
 
+TEST(Interference, SaturatedDepthsThatDifferInTheLastDigitsTie) {
+  // As on the snowflake: the saturated depths differ from voxel to voxel in
+  // the 7th digit (material a hair shallower than the band). Past the cap
+  // the depth is only "at least the band", so they tie: the first saturated
+  // voxel in block order is reported, at the band's depth, on any number of
+  // threads (before, the deepest of them, and which thread found it first).
+  const Aabb box{Vec3(0, 0, -1), Vec3(2, 2, 0)};
+  stock::StockOptions so;
+  so.voxel_mm = 0.01;
+  const stock::Stock s(box, box, so);
+  const double g = s.band_mm();
+  const Aabb region{Vec3(0.2, 0.2, -0.9), Vec3(1.8, 1.8, 0.1)};
+  // In [g (1 - 1e-7), g] deep, a different depth at every voxel.
+  auto wobble = [&](const Vec3& x) {
+    const double t = std::sin(x.x() * 7919.0 + x.y() * 104729.0 + x.z() * 1299709.0);
+    return g * (1 - 0.5e-7 * (1 + t));
+  };
+  auto sd = [&](const Vec3& x) { return std::max(box_signed_distance(region, x), -wobble(x)); };
+  stock::Overlap one;
+  tbb::task_arena(1).execute([&] { one = s.overlap(region, sd, nullptr, 0.0); });
+  ASSERT_TRUE(one.at_least);
+  EXPECT_EQ(one.depth_mm, g);
+  // The first voxel of the scan's order that the region holds deep enough.
+  EXPECT_LE(box_signed_distance(region, one.where), -g);
+  int first_blocks = 0;
+  for (int rep = 0; rep < 40; ++rep) {
+    stock::Overlap two;
+    tbb::task_arena(2).execute([&] { two = s.overlap(region, sd, nullptr, 0.0); });
+    EXPECT_EQ(two.depth_mm, one.depth_mm);
+    first_blocks += two.where == one.where;
+  }
+  EXPECT_EQ(first_blocks, 40) << "the point reported depends on the threads";
+}
+
 TEST(Interference, RapidThroughTheStockIsFlaggedAndARapidAboveIsNot) {
   TempDir dir;
   const std::string prog =

@@ -1237,7 +1237,13 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
                     if (r <= floor) continue;
                     mat = std::max(mat, -r);
                   }
-                  const double depth = std::min(-rg, -mat);
+                  // Past the cap the depth is only known to be at least the
+                  // band's: all such depths tie (at the band), so the first
+                  // saturated voxel in block order is the one reported, on
+                  // any number of threads (their values differ in the 7th
+                  // digit, and the deepest of them was whichever thread's).
+                  double depth = std::min(-rg, -mat);
+                  if (depth >= cap) depth = m.gamma;
                   if (depth > floor) {
                     local.depth_mm = depth;
                     local.where = p;
