@@ -280,6 +280,9 @@ TEST(Cli, BenchRunsTheCasesOfAFolder) {
   EXPECT_EQ(j[0]["case"], "slot");
   EXPECT_EQ(j[0]["moves"], 4);
   EXPECT_EQ(j[0]["repeats"], 2);
+  // The two runs cut the same (the contact records and volumes repeat).
+  EXPECT_EQ(j[0]["repeats_agree"], true);
+  EXPECT_EQ(err.find("different results"), std::string::npos) << err;
   // A 1 mm flat slot, 0.1 deep, across the 2 mm block: 0.2 mm^3.
   EXPECT_NEAR(j[0]["removed_mm3"].get<double>(), 0.2, 0.002);
   EXPECT_GT(j[0]["kernel_updates_per_s"].get<double>(), 0);
