@@ -381,7 +381,8 @@ TEST(Interference, SaturatedDepthsThatDifferInTheLastDigitsTie) {
   tbb::task_arena(1).execute([&] { one = s.overlap(region, sd, nullptr, 0.0); });
   ASSERT_TRUE(one.at_least);
   EXPECT_EQ(one.depth_mm, g);
-  // The first voxel of the scan's order that the region holds deep enough.
+  // The point lies at least the band deep inside the region (where the depth
+  // saturates); the two-thread runs below must report the same point.
   EXPECT_LE(box_signed_distance(region, one.where), -g);
   int first_blocks = 0;
   for (int rep = 0; rep < 40; ++rep) {
