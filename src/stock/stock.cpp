@@ -888,6 +888,48 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
                 }
             continue;
           }
+          // One piece (two in three of the snowflake's evaluated voxels, two
+          // in five of the blade's): the loop below without its bookkeeping,
+          // to the same values. Until a voxel is evaluated (for good, where
+          // the piece is 1-Lipschitz and the loop below would then try it
+          // first, unbounded) the piece's plane at the centre and its box
+          // may pass a voxel over; after that, whatever else would bound it
+          // saves some 3 % of the distances for more than that in upkeep.
+          if (sub.size() == 1) {
+            const std::size_t k0 = sub[0].second;
+            const sweep::Primitive& p0 = *cand[k0];
+            const double key0 = sub[0].first, c0 = seed_d[k0];
+            const bool seeded = !std::isnan(c0), reuse0 = sweep::lipschitz(p0);
+            const Vec3 g0 = cgrad[k0];
+            const Aabb& box0 = cbox[k0];
+            bool bounded = true;
+            for (int ix = bx; ix < bx + 4; ++ix)
+              for (int iy = by; iy < by + 4; ++iy)
+                for (int iz = bz; iz < bz + 4; ++iz) {
+                  const int idx = (ix << 6) | (iy << 3) | iz;
+                  const float v = data[idx];
+                  if (v >= m.gamma) continue;
+                  if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
+                  const int q = ((ix - bx) << 4) | ((iy - by) << 2) | (iz - bz);
+                  const double need = -static_cast<double>(v);
+                  if (key0 - quarter_off[q] >= need) continue;
+                  ++evaluated;
+                  const Vec3 p = lmin + h * Vec3(ix, iy, iz);
+                  if (bounded) {
+                    if (seeded && c0 + g0.dot(quarter_y[q]) >= need) continue;
+                    const double b2 = box_distance2(box0, p);
+                    if (b2 > 0 && (need <= 0 || b2 >= need * need)) continue;
+                    bounded = !reuse0;
+                  }
+                  const double d = sweep::distance_inline(p0, p);
+                  if (-d > v) {
+                    const float nv = static_cast<float>(std::min(-d, g));
+                    data[idx] = nv;
+                    mask.set(static_cast<openvdb::Index>(idx), nv < m.gamma && nv > -m.gamma);
+                  }
+                }
+            continue;
+          }
           // Where every piece's distance is 1-Lipschitz, each piece's value at
           // the voxel it was last evaluated at bounds it here too, less the
           // distance between the two (far tighter than the quarter centre's),
