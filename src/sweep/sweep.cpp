@@ -214,6 +214,7 @@ ProfilePrim make_profile(const Vec3& tip0, const Vec3& tip1, const tool::EdgePro
   pp.f_side[0] = detail::prism_factor(ax, pp.cos_half * d.y() + -pp.sin_half * d.z());
   pp.f_side[1] = detail::prism_factor(ax, -pp.cos_half * d.y() + -pp.sin_half * d.z());
   pp.f_top = detail::prism_factor(ax, d.z());
+  if (pp.prism) pp.inv_dx = 1 / d.x();
   const Aabb local = tool::shape_bounds(pp.edge);
   pp.bounds = world_box(local, Rl, tip0);
   pp.bounds.extend(world_box(local, Rl, tip1));

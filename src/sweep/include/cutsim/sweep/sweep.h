@@ -60,6 +60,9 @@ struct ProfilePrim {
   /// worked out once: for the side faces (gradient (+-cos_half, -sin_half)
   /// in the rake plane, y >= 0 and y < 0) and for the top.
   double f_side[2] = {1, 1}, f_top = 1;
+  /// 1 / d_local.x (a prism's): where along the move a point lies is a
+  /// product, not a division, per voxel.
+  double inv_dx = 0;
 };
 
 /// A fly-cutter's revolution at one place: the swing torus at a pose. Exact.
@@ -308,7 +311,7 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   const Vec3& d = pp.d_local;
   const tool::EdgeProfile& e = pp.edge;
   const double ax = std::fabs(d.x());
-  const double s = clamp01(px / d.x());
+  const double s = clamp01(px * pp.inv_dx);
   const double y = py - s * d.y(), z = pz - s * d.z();
   double gy = 0, gz = 0;
   const double a2 = tool::profile_distance_2d(e, pp.sin_half, pp.cos_half, y, z, &gy, &gz);
