@@ -172,6 +172,17 @@ LinearPrim make_linear(const Vec3& base0, const Vec3& base1, const tool::Revolve
   else if (std::fabs(d.z()) <= 1e-12 * len) lp.kind = LinearPrim::Case::horizontal;
   else if (env.disk_radius == 0) lp.kind = LinearPrim::Case::parallelogram;
   else lp.kind = LinearPrim::Case::general;
+  // The ball core's reciprocals (detail::parallelogram_offset).
+  const double L = env.core_length, r2 = d.x() * d.x() + d.y() * d.y();
+  auto inv = [](double x) { return x > 0 ? 1 / x : 0.0; };
+  if (L * L * r2 >= 1e-30) {
+    lp.inv_r2 = 1 / r2;
+    lp.inv_lr2 = 1 / (L * r2);
+  }
+  lp.inv_dd = inv(d.squaredNorm());
+  lp.inv_ll = inv(L * L);
+  const double span = std::max(0.0, d.z()) + L - std::min(0.0, d.z());
+  lp.inv_span = inv(span * span);
   const Vec3 w = R.col(2);
   lp.bounds = envelope_box(base0, w, env);
   lp.bounds.extend(envelope_box(base1, w, env));

@@ -29,6 +29,12 @@ struct LinearPrim {
   tool::RevolvedEnvelope env;
   Aabb bounds;      ///< of the swept region
   enum class Case { vertical, horizontal, parallelogram, general } kind;
+  /// A ball end's core sweep (detail::ball_core_offset), worked out once so
+  /// that a voxel's distance takes products, not divisions: 1 / r2 and
+  /// 1 / (L r2), r2 = d.x^2 + d.y^2 and L the core's length (0 where the
+  /// parallelogram is a segment), and 1 / |e|^2 of its edges: e = d (the
+  /// bottom and top), (0, 0, L) (the sides) and the vertical case's span.
+  double inv_r2 = 0, inv_lr2 = 0, inv_dd = 0, inv_ll = 0, inv_span = 0;
 };
 
 /// Envelope moved along a circular arc in the plane normal to the tool axis
@@ -221,20 +227,27 @@ struct Off {
   return {pax - t * abx, pay - t * aby, paz - t * abz};
 }
 
+// The same for the segment from a along ab, given 1 / |ab|^2 (0 for a point).
+[[gnu::always_inline]] inline Off seg_offset_inv(const Off& p, const Off& a, const Off& ab, double inv_l2) {
+  const double pax = p.x - a.x, pay = p.y - a.y, paz = p.z - a.z;
+  const double t = clamp01((pax * ab.x + pay * ab.y + paz * ab.z) * inv_l2);
+  return {pax - t * ab.x, pay - t * ab.y, paz - t * ab.z};
+}
+
 // p less its nearest point on the parallelogram {s d + t u : s, t in
-// [0,1]}, u = (0,0,L): its norm is the distance, and over the norm the
-// gradient.
-[[gnu::always_inline]] inline Off parallelogram_offset(const Off& p, const Off& d, double L) {
-  const Off o{0, 0, 0}, u{0, 0, L}, du{d.x, d.y, d.z + L};
+// [0,1]}, u = (0,0,L) (a ball end's core swept along d): its norm is the
+// distance, and over the norm the gradient. The piece's reciprocals
+// (LinearPrim::inv_r2 ...) stand for its divisions.
+[[gnu::always_inline]] inline Off parallelogram_offset(const Off& p, const Off& d, double L, const LinearPrim& lp) {
+  const Off o{0, 0, 0}, u{0, 0, L}, du{d.x, d.y, d.z + L}, e{0, 0, L};
   // u is vertical, so the plane's normal d x u is level: (d.y, -d.x, 0) L.
-  const double r2 = d.x * d.x + d.y * d.y;
-  if (L * L * r2 < 1e-30) return seg_offset(p, o, du);
+  if (lp.inv_lr2 == 0) return seg_offset(p, o, du);
   // In-plane coordinates (s, t) of p's projection: p = s d + t u + (normal).
   const double ph = p.x * d.x + p.y * d.y;
-  const double s = ph / r2;
-  const double t = (p.z * r2 - ph * d.z) / (L * r2);
+  const double s = ph * lp.inv_r2;
+  const double t = (p.z * (d.x * d.x + d.y * d.y) - ph * d.z) * lp.inv_lr2;
   if (s >= 0 && s <= 1 && t >= 0 && t <= 1) {
-    const double k = (p.x * d.y - p.y * d.x) / r2;
+    const double k = (p.x * d.y - p.y * d.x) * lp.inv_r2;
     return {k * d.y, -k * d.x, 0};
   }
   // Outside: the nearest point of a convex polygon lies on an edge whose
@@ -248,10 +261,10 @@ struct Off {
   // A side edge's nearest point to a point below its lower end is that
   // end, which the bottom edge holds too: then only the bottom edge (as
   // below a ball end's centre, where it cuts).
-  if (t < 0) take(seg_offset(p, o, d));
-  if (t > 1) take(seg_offset(p, u, du));
-  if (s < 0 && !(t < 0 && p.z <= 0)) take(seg_offset(p, o, u));
-  if (s > 1 && !(t < 0 && p.z <= d.z)) take(seg_offset(p, d, du));
+  if (t < 0) take(seg_offset_inv(p, o, d, lp.inv_dd));
+  if (t > 1) take(seg_offset_inv(p, u, d, lp.inv_dd));
+  if (s < 0 && !(t < 0 && p.z <= 0)) take(seg_offset_inv(p, o, e, lp.inv_ll));
+  if (s > 1 && !(t < 0 && p.z <= d.z)) take(seg_offset_inv(p, d, e, lp.inv_ll));
   return best;
 }
 
@@ -262,9 +275,11 @@ struct Off {
   const Vec3& dl = lp.d_local;
   const Off d{dl.x(), dl.y(), dl.z()};
   const double L = lp.env.core_length;
-  if (lp.kind == LinearPrim::Case::vertical)
-    return seg_offset(p, Off{0, 0, std::min(0.0, d.z)}, Off{0, 0, std::max(0.0, d.z) + L});
-  return parallelogram_offset(p, d, L);
+  if (lp.kind == LinearPrim::Case::vertical) {
+    const double z0 = std::min(0.0, d.z);
+    return seg_offset_inv(p, Off{0, 0, z0}, Off{0, 0, std::max(0.0, d.z) + L - z0}, lp.inv_span);
+  }
+  return parallelogram_offset(p, d, L, lp);
 }
 
 /// A world point in the piece's frame.
