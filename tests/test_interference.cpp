@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <initializer_list>
 #include <random>
 #include <set>
 #include <sstream>
@@ -131,21 +132,31 @@ std::vector<tool::FlankBody> flank_bodies(const char* spec) {
   return out;
 }
 
+// Calls fn(spec, body, its sines) for each flank body of each tool spec;
+// returns how many there were.
+template <class Fn>
+int for_each_flank_body(std::initializer_list<const char*> specs, Fn fn) {
+  int n = 0;
+  for (const char* spec : specs)
+    for (const tool::FlankBody& f : flank_bodies(spec)) {
+      ++n;
+      fn(spec, f, tool::flank_trig(f));
+    }
+  return n;
+}
+
 TEST(Interference, FlankBodyWithItsSinesWorkedOutOnceIsTheShapesDistance) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(-0.3, 0.3);
-  int flanks = 0;
-  for (const char* spec : {"vtool:angle=90,clearance=7,h=0.1,body=0.3", "nose:r=0.5,clearance=5"}) {
-    for (const tool::FlankBody& fb : flank_bodies(spec)) {
-      const tool::FlankBody* f = &fb;
-      ++flanks;
-      const tool::FlankTrig trig = tool::flank_trig(*f);
-      for (int i = 0; i < 20000; ++i) {
-        const Vec3 p(u(rng), u(rng), u(rng) + 0.2);
-        ASSERT_EQ(tool::flank_distance(*f, trig, p), tool::shape_distance(tool::Shape(fb), p)) << spec << " " << p.transpose();
-      }
-    }
-  }
+  const int flanks = for_each_flank_body(
+      {"vtool:angle=90,clearance=7,h=0.1,body=0.3", "nose:r=0.5,clearance=5"},
+      [&](const char* spec, const tool::FlankBody& f, const tool::FlankTrig& trig) {
+        for (int i = 0; i < 20000; ++i) {
+          const Vec3 p(u(rng), u(rng), u(rng) + 0.2);
+          ASSERT_EQ(tool::flank_distance(f, trig, p), tool::shape_distance(tool::Shape(f), p))
+              << spec << " " << p.transpose();
+        }
+      });
   EXPECT_EQ(flanks, 2);
 }
 
@@ -155,40 +166,38 @@ TEST(Interference, FlankBodyWithItsSinesWorkedOutOnceIsTheShapesDistance) {
 TEST(Interference, FlankBodysTangentPlaneLiesBelowItsDistance) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(-0.3, 0.3);
-  int flanks = 0, kinks = 0;
+  int kinks = 0;
   std::set<int> terms;  // which of the four terms were largest at x
-  for (const char* spec : {"vtool:angle=90,clearance=7,h=0.1,body=0.3", "vtool:angle=60,clearance=12,h=0.05,body=0.2",
-                           "nose:r=0.5,clearance=5"}) {
-    for (const tool::FlankBody& fb : flank_bodies(spec)) {
-      const tool::FlankBody* f = &fb;
-      ++flanks;
-      const tool::FlankTrig trig = tool::flank_trig(*f);
-      for (int i = 0; i < 4000; ++i) {
-        const Vec3 x(u(rng), u(rng), u(rng) + 0.1);
-        Vec3 g = Vec3::Constant(std::nan(""));
-        const double dx = tool::flank_distance(*f, trig, x, &g);
-        ASSERT_EQ(dx, tool::flank_distance(*f, trig, x));
-        ASSERT_LE(g.norm(), 1 + 1e-12);
-        const Vec3 dxc(f->edge.cos_o, f->edge.sin_o, 0);
-        terms.insert(g == Vec3::UnitZ()                                    ? 0   // top
-                     : g == -dxc                                           ? 1   // back end
-                     : g == Vec3(trig.c_rake * dxc + trig.s_rake * Vec3::UnitZ()) ? 2   // rake face
-                                                                           : 3);  // flank
-        // Near x (the scan's quarters) and far from it.
-        for (int j = 0; j < 25; ++j) {
-          const double r = j % 2 ? 0.002 : 0.3;
-          const Vec3 y = x + r * Vec3(u(rng), u(rng), u(rng));
-          ASSERT_GE(tool::flank_distance(*f, trig, y) + 1e-13, dx + g.dot(y - x))
-              << spec << " at " << x.transpose() << " to " << y.transpose();
+  const int flanks = for_each_flank_body(
+      {"vtool:angle=90,clearance=7,h=0.1,body=0.3", "vtool:angle=60,clearance=12,h=0.05,body=0.2",
+       "nose:r=0.5,clearance=5"},
+      [&](const char* spec, const tool::FlankBody& fb, const tool::FlankTrig& trig) {
+        const tool::FlankBody* f = &fb;
+        for (int i = 0; i < 4000; ++i) {
+          const Vec3 x(u(rng), u(rng), u(rng) + 0.1);
+          Vec3 g = Vec3::Constant(std::nan(""));
+          const double dx = tool::flank_distance(*f, trig, x, &g);
+          ASSERT_EQ(dx, tool::flank_distance(*f, trig, x));
+          ASSERT_LE(g.norm(), 1 + 1e-12);
+          const Vec3 dxc(f->edge.cos_o, f->edge.sin_o, 0);
+          terms.insert(g == Vec3::UnitZ()                                    ? 0   // top
+                       : g == -dxc                                           ? 1   // back end
+                       : g == Vec3(trig.c_rake * dxc + trig.s_rake * Vec3::UnitZ()) ? 2   // rake face
+                                                                             : 3);  // flank
+          // Near x (the scan's quarters) and far from it.
+          for (int j = 0; j < 25; ++j) {
+            const double r = j % 2 ? 0.002 : 0.3;
+            const Vec3 y = x + r * Vec3(u(rng), u(rng), u(rng));
+            ASSERT_GE(tool::flank_distance(*f, trig, y) + 1e-13, dx + g.dot(y - x))
+                << spec << " at " << x.transpose() << " to " << y.transpose();
+          }
+          // And it is that term's gradient: along g a small step raises the
+          // distance by |g|^2 times the step, up to the kinks.
+          const double e = 1e-7;
+          const double fd = (tool::flank_distance(*f, trig, x + e * g) - dx) / e;
+          if (std::fabs(fd - g.squaredNorm()) > 1e-4) ++kinks;  // a kink within 1e-7 of x: rare
         }
-        // And it is that term's gradient: along g a small step raises the
-        // distance by |g|^2 times the step, up to the kinks.
-        const double e = 1e-7;
-        const double fd = (tool::flank_distance(*f, trig, x + e * g) - dx) / e;
-        if (std::fabs(fd - g.squaredNorm()) > 1e-4) ++kinks;  // a kink within 1e-7 of x: rare
-      }
-    }
-  }
+      });
   EXPECT_EQ(flanks, 3);
   EXPECT_LT(kinks, 12);
   EXPECT_EQ(terms.size(), 4u) << "each of the four terms largest somewhere";

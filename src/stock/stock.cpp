@@ -1250,7 +1250,7 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
             // cone where the quarter straddles a face: the voxels beyond
             // the face are passed over); at the quarter's lowest, the whole.
             Vec3 gq = Vec3::Zero();
-            const double rq = region_plane ? region_plane(cq, &gq) : region(cq);
+            const double rq = plane ? region_plane(cq, &gq) : region(cq);
             const double rq_low = rq - kPlaneMargin;
             if (-rq + hq <= floor) continue;
             if (plane && -(rq_low - 1.5 * m.h * gq.cwiseAbs().sum()) <= floor) continue;
