@@ -823,6 +823,28 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         auto& mask = leaf->getValueMask();
         bool air = true;
         std::uint64_t evaluated = 0, quarter_aired = 0;
+        // Calls fn(index, place in the quarter, value, centre) for each voxel
+        // of the quarter at (bx, by, bz) that holds material, within the ROI.
+        auto material_voxels = [&](int bx, int by, int bz, auto&& fn) {
+          for (int ix = bx; ix < bx + 4; ++ix)
+            for (int iy = by; iy < by + 4; ++iy)
+              for (int iz = bz; iz < bz + 4; ++iz) {
+                const int idx = (ix << 6) | (iy << 3) | iz;
+                const float v = data[idx];
+                if (v >= m.gamma) continue;
+                if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
+                fn(idx, ((ix - bx) << 4) | ((iy - by) << 2) | (iz - bz), v, lmin + h * Vec3(ix, iy, iz));
+              }
+        };
+        // A voxel of value v where the nearest piece is d away: -d where that
+        // is more (less material), clamped to the band.
+        auto cut_voxel = [&](int idx, float v, double d) {
+          if (-d > v) {
+            const float nv = static_cast<float>(std::min(-d, g));
+            data[idx] = nv;
+            mask.set(static_cast<openvdb::Index>(idx), nv < m.gamma && nv > -m.gamma);
+          }
+        };
         // Each 4 x 4 x 4 quarter of the leaf on its own: the pieces' distances
         // at its centre bound its voxels' more tightly than the leaf's.
         for (int sb = 0; sb < 8; ++sb) {
@@ -876,16 +898,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           // band under a cut is mostly such quarters.
           if (const sweep::Primitive& p0 = *cand[sub[0].second];
               sweep::lipschitz(p0) && sweep::distance_inline(p0, cb) + hd_sub <= -g - 1e-6 * h) {
-            for (int ix = bx; ix < bx + 4; ++ix)
-              for (int iy = by; iy < by + 4; ++iy)
-                for (int iz = bz; iz < bz + 4; ++iz) {
-                  const int idx = (ix << 6) | (iy << 3) | iz;
-                  if (data[idx] >= m.gamma) continue;
-                  if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
-                  data[idx] = m.gamma;
-                  mask.setOff(static_cast<openvdb::Index>(idx));
-                  ++quarter_aired;
-                }
+            material_voxels(bx, by, bz, [&](int idx, int, float, const Vec3&) {
+              data[idx] = m.gamma;
+              mask.setOff(static_cast<openvdb::Index>(idx));
+              ++quarter_aired;
+            });
             continue;
           }
           // One piece (two in three of the snowflake's evaluated voxels, two
@@ -903,31 +920,18 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             const Vec3 g0 = cgrad[k0];
             const Aabb& box0 = cbox[k0];
             bool bounded = true;
-            for (int ix = bx; ix < bx + 4; ++ix)
-              for (int iy = by; iy < by + 4; ++iy)
-                for (int iz = bz; iz < bz + 4; ++iz) {
-                  const int idx = (ix << 6) | (iy << 3) | iz;
-                  const float v = data[idx];
-                  if (v >= m.gamma) continue;
-                  if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
-                  const int q = ((ix - bx) << 4) | ((iy - by) << 2) | (iz - bz);
-                  const double need = -static_cast<double>(v);
-                  if (key0 - quarter_off[q] >= need) continue;
-                  ++evaluated;
-                  const Vec3 p = lmin + h * Vec3(ix, iy, iz);
-                  if (bounded) {
-                    if (seeded && c0 + g0.dot(quarter_y[q]) >= need) continue;
-                    const double b2 = box_distance2(box0, p);
-                    if (b2 > 0 && (need <= 0 || b2 >= need * need)) continue;
-                    bounded = !reuse0;
-                  }
-                  const double d = sweep::distance_inline(p0, p);
-                  if (-d > v) {
-                    const float nv = static_cast<float>(std::min(-d, g));
-                    data[idx] = nv;
-                    mask.set(static_cast<openvdb::Index>(idx), nv < m.gamma && nv > -m.gamma);
-                  }
-                }
+            material_voxels(bx, by, bz, [&](int idx, int q, float v, const Vec3& p) {
+              const double need = -static_cast<double>(v);
+              if (key0 - quarter_off[q] >= need) return;
+              ++evaluated;
+              if (bounded) {
+                if (seeded && c0 + g0.dot(quarter_y[q]) >= need) return;
+                const double b2 = box_distance2(box0, p);
+                if (b2 > 0 && (need <= 0 || b2 >= need * need)) return;
+                bounded = !reuse0;
+              }
+              cut_voxel(idx, v, sweep::distance_inline(p0, p));
+            });
             continue;
           }
           // Where every piece's distance is 1-Lipschitz, each piece's value at
@@ -971,78 +975,66 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             runs.push_back(r);
           }
           std::size_t nearest = none;
-          for (int ix = bx; ix < bx + 4; ++ix)
-            for (int iy = by; iy < by + 4; ++iy)
-              for (int iz = bz; iz < bz + 4; ++iz) {
-                const int idx = (ix << 6) | (iy << 3) | iz;
-                const float v = data[idx];
-                if (v >= m.gamma) continue;
-                if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
-                const int q = ((ix - bx) << 4) | ((iy - by) << 2) | (iz - bz);
-                const Vec3 p = lmin + h * Vec3(ix, iy, iz);
-                const Vec3& y = quarter_y[q];  // p - cb
-                const double off = quarter_off[q];
-                const double need = -static_cast<double>(v);
-                if (near[0].key - off >= need) continue;
-                // Only d < -v changes the voxel; a piece farther than that (or
-                // than the nearest piece so far) cannot matter.
-                double d = std::numeric_limits<double>::infinity();
-                std::size_t best = none;
-                auto eval = [&](std::size_t j) {
-                  Near& n = near[j];
-                  double dj;
-                  if (!reuse) {
-                    dj = sweep::distance_inline(*n.prim, p);
-                  } else if (sweep::convex_distance(*n.prim, p, &dj, &n.grad)) {
-                    n.bound = Near::plane;
-                    n.c = dj - n.grad.dot(y);
-                  } else {
-                    dj = sweep::distance_inline(*n.prim, p);
-                    n.bound = Near::cone;
-                    n.c = dj;
-                    n.at = y;
-                  }
-                  if (dj < d) {
-                    d = dj;
-                    best = j;
-                  }
-                };
-                if (nearest != none) eval(nearest);
-                for (std::size_t j = 0; j < near.size() && d > -g; ++j) {  // at -g: clamped to air whatever the rest
-                  const double thr = std::min(d, need);
-                  const Near& n = near[j];
-                  if (n.key - off >= thr) break;  // and every piece after it
-                  if (j % kRun == 0) {
-                    const Run& r = runs[j / kRun];
-                    if (r.c + r.grad.dot(y) - r.spread * off >= thr) {
-                      j += kRun - 1;  // the whole run
-                      continue;
-                    }
-                  }
-                  if (j == nearest) continue;
-                  // Convex pieces: the tangent plane at the last voxel; other
-                  // 1-Lipschitz pieces: the last value less the step, on
-                  // squared lengths (c - thr >= |y - at|): a fly-cutter's tori
-                  // all cut within a voxel of each other, so every voxel
-                  // passes dozens of them, and the root was a quarter of the
-                  // update there.
-                  if (n.bound == Near::plane && n.c + n.grad.dot(y) >= thr) continue;
-                  if (n.bound == Near::cone) {
-                    const double margin = n.c - thr;
-                    if (margin >= 0 && margin * margin >= (y - n.at).squaredNorm()) continue;
-                  }
-                  const double b2 = box_distance2(*n.box, p);
-                  if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
-                  eval(j);
-                }
-                if (reuse && best != none) nearest = best;
-                ++evaluated;
-                if (-d > v) {
-                  const float nv = static_cast<float>(std::min(-d, g));
-                  data[idx] = nv;
-                  mask.set(static_cast<openvdb::Index>(idx), nv < m.gamma && nv > -m.gamma);
+          material_voxels(bx, by, bz, [&](int idx, int q, float v, const Vec3& p) {
+            const Vec3& y = quarter_y[q];  // p - cb
+            const double off = quarter_off[q];
+            const double need = -static_cast<double>(v);
+            if (near[0].key - off >= need) return;
+            // Only d < -v changes the voxel; a piece farther than that (or
+            // than the nearest piece so far) cannot matter.
+            double d = std::numeric_limits<double>::infinity();
+            std::size_t best = none;
+            auto eval = [&](std::size_t j) {
+              Near& n = near[j];
+              double dj;
+              if (!reuse) {
+                dj = sweep::distance_inline(*n.prim, p);
+              } else if (sweep::convex_distance(*n.prim, p, &dj, &n.grad)) {
+                n.bound = Near::plane;
+                n.c = dj - n.grad.dot(y);
+              } else {
+                dj = sweep::distance_inline(*n.prim, p);
+                n.bound = Near::cone;
+                n.c = dj;
+                n.at = y;
+              }
+              if (dj < d) {
+                d = dj;
+                best = j;
+              }
+            };
+            if (nearest != none) eval(nearest);
+            for (std::size_t j = 0; j < near.size() && d > -g; ++j) {  // at -g: clamped to air whatever the rest
+              const double thr = std::min(d, need);
+              const Near& n = near[j];
+              if (n.key - off >= thr) break;  // and every piece after it
+              if (j % kRun == 0) {
+                const Run& r = runs[j / kRun];
+                if (r.c + r.grad.dot(y) - r.spread * off >= thr) {
+                  j += kRun - 1;  // the whole run
+                  continue;
                 }
               }
+              if (j == nearest) continue;
+              // Convex pieces: the tangent plane at the last voxel; other
+              // 1-Lipschitz pieces: the last value less the step, on
+              // squared lengths (c - thr >= |y - at|): a fly-cutter's tori
+              // all cut within a voxel of each other, so every voxel
+              // passes dozens of them, and the root was a quarter of the
+              // update there.
+              if (n.bound == Near::plane && n.c + n.grad.dot(y) >= thr) continue;
+              if (n.bound == Near::cone) {
+                const double margin = n.c - thr;
+                if (margin >= 0 && margin * margin >= (y - n.at).squaredNorm()) continue;
+              }
+              const double b2 = box_distance2(*n.box, p);
+              if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
+              eval(j);
+            }
+            if (reuse && best != none) nearest = best;
+            ++evaluated;
+            cut_voxel(idx, v, d);
+          });
         }
         tiled[i] = air ? kAir : leaf_state(data);
         m.voxel_evaluations.fetch_add(evaluated, std::memory_order_relaxed);
