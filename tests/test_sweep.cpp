@@ -538,3 +538,107 @@ TEST(Sweep, VToolPrismIsItsPlanesInsideAndTheExtrusionOfItsSectionOutside) {
 }
 
 }  // namespace cutsim::test
+
+namespace cutsim::test {
+namespace {
+// The joint piece of two consecutive straight moves of `tool` (tips a ->
+// b -> c at orientation R), with a slab of half width w.
+struct Joint {
+  sweep::Primitive first, second, joint;
+};
+Joint joint_of(const std::string& tool, const Vec3& a, const Vec3& b, const Vec3& c, double w,
+               const Eigen::Matrix3d& R = Eigen::Matrix3d::Identity()) {
+  const tool::Tool t = tool::parse_tool_spec(tool, "test");
+  const sweep::Sweep s0 = sweep::sweep_line(a, b, R, t), s1 = sweep::sweep_line(b, c, R, t);
+  const auto j = sweep::joint_prim(std::get<sweep::ProfilePrim>(s0.prims[0]), std::get<sweep::ProfilePrim>(s1.prims[0]),
+                                   w, Aabb{});
+  EXPECT_TRUE(j.has_value());
+  return {s0.prims[0], s1.prims[0], j ? sweep::Primitive(*j) : s0.prims[0]};
+}
+}  // namespace
+
+TEST(Sweep, JointPieceLiesInTheTwoPrismsAndBoundsTheirUnionsDepth) {
+  // Where one move of a V (or nose) tool follows another at the same
+  // orientation, the joint piece must hold (sweep::JointPrim): where it is
+  // negative, the ball of that radius about the point lies in the two
+  // prisms' union (its depth a lower bound of the union's; checked on 26
+  // points of the ball's surface), and where it is not, it is no nearer
+  // than the union. Kinks up and down, gentle and steep (a convex kink's
+  // far prism comes nearer than the near one's end cap would say), a bend
+  // sideways, and a round nose. At the joint itself, well inside the cut,
+  // it reaches the slab's depth, where each prism's end cap says 0.
+  const double w = 0.0015;
+  struct Case {
+    const char* tool;
+    Vec3 a, b, c;
+    bool lipschitz;
+  };
+  const Case cases[] = {
+      {"vtool:angle=90,h=0.05", Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.01, 0, 0), true},          // straight
+      {"vtool:angle=90,h=0.05", Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.01, 0, 0.003), true},      // convex kink
+      {"vtool:angle=90,h=0.05", Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.01, 0, -0.003), true},     // concave
+      {"vtool:angle=60,h=0.05", Vec3(-0.002, 0, 0.006), Vec3(0, 0, 0), Vec3(0.002, 0, 0.006), true},  // steep V
+      {"vtool:angle=90,h=0.05", Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.01, 0.002, 0), false},     // sideways
+      {"nose:r=0.01", Vec3(-0.01, 0, 0.001), Vec3(0, 0, 0), Vec3(0.01, 0, 0.002), false},    // round nose
+  };
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (const Case& k : cases) {
+    const Joint j = joint_of(k.tool, k.a, k.b, k.c, w);
+    EXPECT_EQ(sweep::lipschitz(j.joint), k.lipschitz) << k.tool;
+    auto uni = [&](const Vec3& p) { return std::min(sweep::distance(j.first, p), sweep::distance(j.second, p)); };
+    int inside = 0;
+    for (int i = 0; i < 20000; ++i) {
+      const Vec3 p(0.003 * u(rng), 0.01 * u(rng), 0.004 + 0.006 * u(rng));
+      const double g = sweep::distance(j.joint, p), un = uni(p);
+      if (g >= 0) {
+        ASSERT_GE(g, un - 1e-12) << k.tool << " outside at " << p.transpose();
+        continue;
+      }
+      ++inside;
+      ASSERT_LE(un, 0.0) << k.tool << " at " << p.transpose();
+      if (!k.lipschitz) continue;  // a first-order depth: the sign only
+      for (int dx = -1; dx <= 1; ++dx)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dz = -1; dz <= 1; ++dz) {
+            if (dx == 0 && dy == 0 && dz == 0) continue;
+            const Vec3 q = p + (-g) * (1 - 1e-9) * Vec3(dx, dy, dz).normalized();
+            ASSERT_LE(uni(q), 1e-12) << k.tool << " ball about " << p.transpose() << " radius " << -g;
+          }
+    }
+    EXPECT_GT(inside, 1000) << k.tool;
+    if (k.lipschitz) {
+      double worst = 0;
+      for (int i = 0; i < 20000; ++i) {
+        const Vec3 p(0.003 * u(rng), 0.01 * u(rng), 0.004 + 0.006 * u(rng));
+        const Vec3 q = p + 0.001 * Vec3(u(rng), u(rng), u(rng));
+        worst = std::max(worst, std::fabs(sweep::distance(j.joint, p) - sweep::distance(j.joint, q)) / (p - q).norm());
+      }
+      EXPECT_LE(worst, 1 + 1e-9) << k.tool;
+    }
+  }
+  // Straight on, 3 um above the tip at the joint: each prism's end cap
+  // says 0 there; the joint, the slab's half width (the flanks are 2.1 um
+  // away).
+  const Joint s = joint_of("vtool:angle=90,h=0.05", Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.01, 0, 0), w);
+  const Vec3 at(0, 0, 0.003);
+  EXPECT_EQ(sweep::distance(s.first, at), 0.0);
+  EXPECT_EQ(sweep::distance(s.second, at), 0.0);
+  EXPECT_NEAR(sweep::distance(s.joint, at), -w, 1e-15);
+  // No joint: turned, reversed, apart, or another edge.
+  const tool::Tool v = tool::parse_tool_spec("vtool:angle=90,h=0.05", "test");
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d turned = Eigen::AngleAxisd(0.1, Vec3::UnitZ()).toRotationMatrix();
+  auto prism = [&](const Vec3& p0, const Vec3& p1, const Eigen::Matrix3d& R, const tool::Tool& t) {
+    return std::get<sweep::ProfilePrim>(sweep::sweep_line(p0, p1, R, t).prims[0]);
+  };
+  const sweep::ProfilePrim first = prism(Vec3(-0.01, 0, 0), Vec3(0, 0, 0), I, v);
+  EXPECT_FALSE(sweep::joint_prim(first, prism(Vec3(0, 0, 0), Vec3(0.01, 0, 0), turned, v), w, Aabb{}));
+  EXPECT_FALSE(sweep::joint_prim(first, prism(Vec3(0, 0, 0), Vec3(-0.005, 0, 0.001), I, v), w, Aabb{}));
+  EXPECT_FALSE(sweep::joint_prim(first, prism(Vec3(0, 1e-6, 0), Vec3(0.01, 0, 0), I, v), w, Aabb{}));
+  EXPECT_FALSE(sweep::joint_prim(
+      first, prism(Vec3(0, 0, 0), Vec3(0.01, 0, 0), I, tool::parse_tool_spec("vtool:angle=60,h=0.05", "test")), w,
+      Aabb{}));
+}
+
+}  // namespace cutsim::test

@@ -404,6 +404,10 @@ SimResult simulate(const SimOptions& opt) {
     pending.clear();
     pending_prims = 0;
   };
+  // A V or nose tool's consecutive moves at one orientation: each move's
+  // sweep carries the piece that closes its joint with the move before
+  // (sweep::JointPrim), whose slab is the band: deeper is clamped alike.
+  sweep::Joiner join(2 * res.voxel_mm, stock_reach);
   InterferenceChecker::PendingCuts held;
   held.change = [&](const Vec3& p, double v) { return cuts_change_voxel(pending, *res.stock, p, v); };
   held.flush = [&] {
@@ -417,6 +421,7 @@ SimResult simulate(const SimOptions& opt) {
     const tool::Tool& t = tool_for(m);
     const PlannedMove pm = planner.plan(m);
     sweep::Sweep sw = planner.sweep(m, pm, t);
+    join(sw);
     const auto t1 = Clock::now();
     flush_s = 0;
     const bool touched = checker.check(m, pm, t, &held);

@@ -759,6 +759,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         enum Bound : char { none, plane, cone } bound;
         double c;  // plane: d(y) >= c + grad . y; cone: d(y) >= c - |y - at|
         Vec3 grad, at;
+        bool inner;  // only its inside matters (sweep::interior_only)
       };
       std::vector<Near> near;
       // Runs of kRun pieces in that order, bounded together from their
@@ -788,7 +789,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         order.clear();
         for (std::size_t k = group[gi]; k < group[gi + 1]; ++k) {
           const std::uint32_t id = keys.piece(pairs[k]);
-          if (sweep::bounds(*prims[id]).expanded(g).overlaps(lbox))
+          if (sweep::bounds(*prims[id]).expanded(sweep::interior_only(*prims[id]) ? 0.0 : g).overlaps(lbox))
             order.emplace_back(bounded_key(pair_d[k], *prims[id]), static_cast<std::uint32_t>(k));
         }
         if (order.empty()) {  // split from a tile for nothing
@@ -860,7 +861,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           for (std::size_t k = 0; k < cand.size(); ++k) {
             if (ckey[k] - oc - hd_sub >= need_max) break;  // and every piece after it
             const double b2 = box_distance2(cbox[k], cb);
-            const double reach = need_max + hd_sub;
+            const bool inner = sweep::interior_only(*cand[k]);  // matters only where negative
+            const double reach = (inner ? std::min(need_max, 0.0) : need_max) + hd_sub;
             if (b2 > 0 && (reach <= 0 || b2 >= reach * reach)) continue;
             const Vec3& gl = cgrad[k];
             double dk;
@@ -877,7 +879,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               seed_d[k] = std::numeric_limits<double>::quiet_NaN();
             }
             const double key = bounded_key(dk, *cand[k]);
-            if (key - hd_sub >= need_max) continue;
+            if (key - hd_sub >= (inner ? std::min(need_max, 0.0) : need_max)) continue;
             sub.emplace_back(key, static_cast<std::uint32_t>(k));
           }
           if (sub.empty()) continue;
@@ -919,9 +921,10 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             const bool seeded = !std::isnan(c0), reuse0 = sweep::lipschitz(p0);
             const Vec3 g0 = cgrad[k0];
             const Aabb& box0 = cbox[k0];
+            const bool inner = sweep::interior_only(p0);
             bool bounded = true;
             material_voxels(bx, by, bz, [&](int idx, int q, float v, const Vec3& p) {
-              const double need = -static_cast<double>(v);
+              const double need = inner ? std::min(-static_cast<double>(v), 0.0) : -static_cast<double>(v);
               if (key0 - quarter_off[q] >= need) return;
               ++evaluated;
               if (bounded) {
@@ -946,7 +949,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           near.clear();
           for (const auto& [key, k] : sub) {
             reuse = reuse && sweep::lipschitz(*cand[k]);
-            Near& n = near.emplace_back(Near{key, cand[k], &cbox[k], Near::none, 0, Vec3::Zero(), Vec3::Zero()});
+            Near& n = near.emplace_back(
+                Near{key, cand[k], &cbox[k], Near::none, 0, Vec3::Zero(), Vec3::Zero(), sweep::interior_only(*cand[k])});
             if (!std::isnan(seed_d[k])) {  // a convex piece's plane at the centre
               n.bound = Near::plane;
               n.c = seed_d[k];
@@ -1008,6 +1012,10 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               const double thr = std::min(d, need);
               const Near& n = near[j];
               if (n.key - off >= thr) break;  // and every piece after it
+              // (A joint's outside is no nearer than its two prisms: it
+              // matters only where it is negative.)
+              const double lim = n.inner ? std::min(thr, 0.0) : thr;
+              if (n.inner && n.key - off >= lim) continue;
               if (j % kRun == 0) {
                 const Run& r = runs[j / kRun];
                 if (r.c + r.grad.dot(y) - r.spread * off >= thr) {
@@ -1022,13 +1030,13 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               // all cut within a voxel of each other, so every voxel
               // passes dozens of them, and the root was a quarter of the
               // update there.
-              if (n.bound == Near::plane && n.c + n.grad.dot(y) >= thr) continue;
+              if (n.bound == Near::plane && n.c + n.grad.dot(y) >= lim) continue;
               if (n.bound == Near::cone) {
-                const double margin = n.c - thr;
+                const double margin = n.c - lim;
                 if (margin >= 0 && margin * margin >= (y - n.at).squaredNorm()) continue;
               }
               const double b2 = box_distance2(*n.box, p);
-              if (b2 > 0 && (thr <= 0 || b2 >= thr * thr)) continue;
+              if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) continue;
               eval(j);
             }
             if (reuse && best != none) nearest = best;
@@ -1073,7 +1081,9 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (interrupted()) return;  // abandoned: the caller throws
       const sweep::Primitive& p = *prims[i];
-      const Aabb wb = sweep::bounds(p).expanded(g + h);
+      // (A piece whose inside only matters reaches no farther than its box.)
+      const double reach = sweep::interior_only(p) ? 0.0 : g;
+      const Aabb wb = sweep::bounds(p).expanded(reach + h);
       CoordBBox bb(floor_coord((wb.min - m.origin) / h), ceil_coord((wb.max - m.origin) / h));
       bb.intersect(m.roi_index);
       if (bb.empty()) continue;
@@ -1091,7 +1101,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         if (!acc.probeConstLeaf(o) && acc.getValue(o) > 0) return;  // air tile
         const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
         const double d = sweep::distance(p, c0);
-        if (d > g + hd0) return;
+        if (d > reach + hd0) return;
         // (the test step 2 makes on the smallest distance)
         const bool deep = d < -(g + hd0) && m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
         out.push_back(keys.key(o, deep ? kDeep : id));
@@ -1108,7 +1118,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               if (dim == kMid && !m.may_hold_material(bo)) return false;
               if (dim == kNode1Dim && !any_material(bo)) return false;
               const double d = sweep::distance(p, c);
-              if (d > g + hd) return false;
+              if (d > reach + hd) return false;
               if (dim == kSub) return true;  // (blocks set to air whole are the occupancy map's: 32^3 or 128^3)
               // Each voxel's distance is then at most -g: air (step 1b).
               if (lip && d <= -(g + hd) && m.roi_index.isInside(CoordBBox::createCube(bo, dim))) {

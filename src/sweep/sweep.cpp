@@ -336,6 +336,7 @@ double distance(const Primitive& p, const Vec3& x) {
     else if constexpr (std::is_same_v<T, ArcPrim>) return arc_distance(q, x);
     else if constexpr (std::is_same_v<T, ProfilePrim>) return profile_distance(q, x);
     else if constexpr (std::is_same_v<T, HullPrim>) return detail::hull_offset(x, q).norm() - q.radius;
+    else if constexpr (std::is_same_v<T, JointPrim>) return detail::joint_distance(q, x);
     else return torus_distance(q, x);
   }, p);
 }
@@ -355,7 +356,65 @@ bool lipschitz(const Primitive& p) {
     const Vec3& d = pp->d_local;
     return pp->edge.nose_radius == 0 && pp->prism && std::fabs(d.y()) <= 1e-12 * d.norm();
   }
+  // The largest of 1-Lipschitz distances (the prisms', a slab's, a box's).
+  if (const auto* jp = std::get_if<JointPrim>(&p)) return jp->lipschitz;
   return true;
+}
+
+std::optional<JointPrim> joint_prim(const ProfilePrim& a, const ProfilePrim& b, double half_width, const Aabb& reach) {
+  if (!a.prism || !b.prism || !(half_width > 0)) return std::nullopt;
+  if (a.to_local != b.to_local || a.edge.nose_radius != b.edge.nose_radius ||
+      a.edge.half_angle != b.edge.half_angle || a.edge.height != b.edge.height)
+    return std::nullopt;
+  if ((a.d_local.x() > 0) != (b.d_local.x() > 0)) return std::nullopt;
+  const Eigen::Matrix3d Rl = a.to_local.transpose();
+  if ((a.origin + Rl * a.d_local - b.origin).norm() > 1e-9) return std::nullopt;
+  JointPrim jp;
+  jp.origin = b.origin;
+  jp.to_local = b.to_local;
+  auto side = [](const ProfilePrim& p) {
+    JointPrim::Side s;
+    s.d = p.d_local;
+    s.inv_dx = p.inv_dx;
+    s.f_side[0] = p.f_side[0];
+    s.f_side[1] = p.f_side[1];
+    s.f_top = p.f_top;
+    return s;
+  };
+  jp.before = side(a);
+  jp.after = side(b);
+  jp.edge = b.edge;
+  jp.sin_half = b.sin_half;
+  jp.cos_half = b.cos_half;
+  jp.sign = b.d_local.x() > 0 ? 1.0 : -1.0;
+  jp.half_width = half_width;
+  jp.lipschitz = lipschitz(Primitive(a)) && lipschitz(Primitive(b));
+  // Its box: the cross-sections within the slab (each prism's moves
+  // linearly, so those at its ends and at the joint hold the rest), of the
+  // part of the profile that reaches into `reach`.
+  const double ta = std::min(1.0, half_width / std::fabs(a.d_local.x())),
+               tb = std::min(1.0, half_width / std::fabs(b.d_local.x()));
+  const Vec3 tips[3] = {b.origin - ta * (Rl * a.d_local), b.origin, b.origin + tb * (Rl * b.d_local)};
+  const tool::Shape shape(jp.edge);
+  Aabb box;
+  for (const Vec3& t : tips)
+    box.extend(reach.empty() ? world_box(tool::shape_bounds(shape), Rl, t) : world_box_within(shape, Rl, t, reach));
+  jp.bounds = reach.empty() ? box : box.intersected(reach);
+  if (jp.bounds.empty()) return std::nullopt;
+  return jp;
+}
+
+void Joiner::operator()(Sweep& s) {
+  std::optional<ProfilePrim> last;
+  if (!s.prims.empty())
+    if (const auto* p = std::get_if<ProfilePrim>(&s.prims.back())) last = *p;
+  if (last_ && !s.prims.empty())
+    if (const auto* first = std::get_if<ProfilePrim>(&s.prims.front()))
+      if (auto j = joint_prim(*last_, *first, half_width_, reach_)) {
+        s.bounds.extend(j->bounds);
+        s.prims.emplace_back(*j);
+      }
+  last_ = std::move(last);
 }
 
 Aabb world_box(const Aabb& local, const Eigen::Matrix3d& R, const Vec3& tip) {

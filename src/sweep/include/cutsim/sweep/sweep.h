@@ -11,6 +11,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <variant>
 #include <vector>
 
@@ -71,6 +72,39 @@ struct ProfilePrim {
   double inv_dx = 0;
 };
 
+/// The joint of two profile prisms that follow each other at one
+/// orientation (consecutive straight moves of a V or nose tool: joint_prim).
+/// Each prism's flat end cap lies inside the other's cut, so near the joint
+/// each measures the voxels inside their union as no deeper than the way
+/// to its cap: a sheet of near-zero values across the cut, half a voxel of
+/// its section counted as material. This piece is the intersection of the
+/// first prism drawn on past its end, the second drawn back before its
+/// start, a slab of half width `half_width` about the joint and its box:
+/// the part within the first's length lies in the first prism, the rest in
+/// the second, so it lies in their union and its depth (that of an
+/// intersection, the largest of its parts' distances) bounds the union's.
+/// Outside it is no nearer than one of the two prisms (beside the first's
+/// length the first's distance, beside the second's the second's), so it
+/// adds nothing there; its box term makes its distance no less than the
+/// way to its box.
+struct JointPrim {
+  /// One prism's move in the shared frame, with ProfilePrim's factors.
+  struct Side {
+    Vec3 d;
+    double inv_dx = 0;
+    double f_side[2] = {1, 1}, f_top = 1;
+  };
+  Vec3 origin;               ///< the joint: the first prism's end, the second's start
+  Eigen::Matrix3d to_local;  ///< the prisms' (the same)
+  Side before, after;
+  tool::EdgeProfile edge;
+  double sin_half = 0, cos_half = 1;
+  double sign = 1;        ///< +1 where both moves run along the frame's +x, -1 along -x
+  double half_width = 0;  ///< the slab's, along x
+  bool lipschitz = false; ///< both prisms' distances are (sweep::lipschitz)
+  Aabb bounds;
+};
+
 /// A fly-cutter's revolution at one place: the swing torus at a pose. Exact.
 struct TorusPrim {
   Vec3 origin;                ///< tip
@@ -102,7 +136,7 @@ struct HullPrim {
 /// The hull piece of four core points grown by `radius` (normals and bounds set).
 HullPrim hull_prim(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec3& p3, double radius);
 
-using Primitive = std::variant<LinearPrim, ArcPrim, ProfilePrim, TorusPrim, HullPrim>;
+using Primitive = std::variant<LinearPrim, ArcPrim, ProfilePrim, TorusPrim, HullPrim, JointPrim>;
 
 double distance(const Primitive& p, const Vec3& x);
 /// The same, with a profile prism's inlined: for the stock update's voxel
@@ -121,6 +155,10 @@ const Aabb& bounds(const Primitive& p);
 /// approximate minimisation) or other profile prisms (a first-order
 /// estimate when sheared sideways or with a round nose).
 bool lipschitz(const Primitive& p);
+/// True where only the piece's inside matters: outside it is no nearer than
+/// other pieces of the same sweeps (a joint: JointPrim), so the stock
+/// update passes it over wherever it cannot be negative.
+inline bool interior_only(const Primitive& p) { return std::holds_alternative<JointPrim>(p); }
 /// Where the piece's distance is convex in x (a ball end's line: the
 /// distance to the parallelogram or segment its core sweeps less the
 /// ball's radius; a hull piece), or bounded below by a convex function
@@ -194,6 +232,28 @@ Aabb world_box_within(const tool::Shape& shape, const Eigen::Matrix3d& R, const 
 /// boxes are cut to `reach`. `Sweep::distance` stays exact for
 /// points within `reach` up to `reach`'s distance from their outside.
 void clip_bounds(Sweep& s, const Aabb& reach);
+
+/// The piece that closes the joint of `a` and `b` (JointPrim), `b` starting
+/// where `a` ends, with a slab of `half_width` (the stock's band: deeper
+/// values are clamped alike) and its box within `reach` (none: unbounded);
+/// nothing where they are not two prisms of one edge at one orientation,
+/// running the same way along it, within 1e-9 mm of each other at the joint.
+std::optional<JointPrim> joint_prim(const ProfilePrim& a, const ProfilePrim& b, double half_width, const Aabb& reach);
+
+/// Adds to each sweep it is given the joint (joint_prim) of the last piece
+/// of the sweep before and its own first: consecutive moves of a V or nose
+/// tool at one orientation. The sweeps must come in the program's order,
+/// every move's (an empty sweep breaks the chain).
+class Joiner {
+ public:
+  Joiner(double half_width, const Aabb& reach) : half_width_(half_width), reach_(reach) {}
+  void operator()(Sweep& s);
+
+ private:
+  double half_width_;
+  Aabb reach_;
+  std::optional<ProfilePrim> last_;
+};
 
 /// Fly-cutter revolutions: the swing torus at each pose.
 Sweep sweep_tori(const std::vector<Pose>& poses, const tool::SwingTorus& torus);
@@ -314,6 +374,23 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
 // whose in-plane gradient g meets the move d (ax = |d.x|, gd = g . d).
 [[gnu::always_inline]] inline double prism_factor(double ax, double gd) { return ax / hypot2(ax, gd); }
 
+// A prism's in-plane distance, scaled to 3-D: the edge's 2-D distance at
+// (y, z) (the point's in-plane place less the cross-section's) times the
+// lean of its nearest face, or the top's; `f_side` and `f_top` the faces'
+// factors for the move d (ProfilePrim's).
+[[gnu::always_inline]] inline double prism_section(const tool::EdgeProfile& e, double sin_half, double cos_half,
+                                                   const Vec3& d, const double (&f_side)[2], double f_top, double y,
+                                                   double z) {
+  double gy = 0, gz = 0;
+  const double a2 = tool::profile_distance_2d(e, sin_half, cos_half, y, z, &gy, &gz);
+  // (A side face's factor is the piece's: the same arithmetic on the same
+  // gradient, done once. Near the apex the gradient turns with the point.)
+  const double f2 = gz == -sin_half && gy == cos_half    ? f_side[0]
+                    : gz == -sin_half && gy == -cos_half ? f_side[1]
+                                                         : prism_factor(std::fabs(d.x()), gy * d.y() + gz * d.z());
+  return std::max(a2 * f2, (z - e.height) * f_top);
+}
+
 // A profile prism's distance (ProfilePrim::prism): the cross-section at
 // the point's place along the cutting direction is the profile moved along
 // the in-plane part of the move; the side faces lean by that motion, so the
@@ -324,18 +401,8 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   const double px = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, py = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
                pz = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
   const Vec3& d = pp.d_local;
-  const tool::EdgeProfile& e = pp.edge;
-  const double ax = std::fabs(d.x());
   const double s = clamp01(px * pp.inv_dx);
-  const double y = py - s * d.y(), z = pz - s * d.z();
-  double gy = 0, gz = 0;
-  const double a2 = tool::profile_distance_2d(e, pp.sin_half, pp.cos_half, y, z, &gy, &gz);
-  // (A side face's factor is the piece's: the same arithmetic on the same
-  // gradient, done once. Near the apex the gradient turns with the point.)
-  const double f2 = gz == -pp.sin_half && gy == pp.cos_half    ? pp.f_side[0]
-                    : gz == -pp.sin_half && gy == -pp.cos_half ? pp.f_side[1]
-                                                               : prism_factor(ax, gy * d.y() + gz * d.z());
-  const double a = std::max(a2 * f2, (z - e.height) * pp.f_top);
+  const double a = prism_section(pp.edge, pp.sin_half, pp.cos_half, d, pp.f_side, pp.f_top, py - s * d.y(), pz - s * d.z());
   const double b = d.x() > 0 ? std::max(-px, px - d.x()) : std::max(px, d.x() - px);
   // prism_sd(a, b), without its root where b <= 0 (inside the piece's
   // length): sqrt(a * a) is a to the bit (round to nearest), above 1e-150.
@@ -343,10 +410,43 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   return prism_sd(a, b);
 }
 
+// A joint's distance (JointPrim): the largest of the first prism's
+// (drawn on past its end: only its start capped), the second's (drawn back:
+// only its end capped), the slab's and the box's.
+[[gnu::always_inline]] inline double joint_distance(const JointPrim& jp, const Vec3& w) {
+  const double rx = w.x() - jp.origin.x(), ry = w.y() - jp.origin.y(), rz = w.z() - jp.origin.z();
+  const Eigen::Matrix3d& m = jp.to_local;
+  const double ux = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, uy = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
+               uz = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
+  const JointPrim::Side& a = jp.before;
+  const JointPrim::Side& b = jp.after;
+  const tool::EdgeProfile& e = jp.edge;
+  // The first prism starts at -a.d.
+  const double xa = ux + a.d.x(), sa = std::max(xa * a.inv_dx, 0.0);
+  const double ta = prism_sd(prism_section(e, jp.sin_half, jp.cos_half, a.d, a.f_side, a.f_top,
+                                           uy + a.d.y() - sa * a.d.y(), uz + a.d.z() - sa * a.d.z()),
+                             -jp.sign * xa);
+  const double sb = std::min(ux * b.inv_dx, 1.0);
+  const double tb = prism_sd(
+      prism_section(e, jp.sin_half, jp.cos_half, b.d, b.f_side, b.f_top, uy - sb * b.d.y(), uz - sb * b.d.z()),
+      jp.sign * (ux - b.d.x()));
+  const double slab = std::fabs(ux) - jp.half_width;
+  // The box's signed distance.
+  const double ox = std::max(jp.bounds.min.x() - w.x(), w.x() - jp.bounds.max.x()),
+               oy = std::max(jp.bounds.min.y() - w.y(), w.y() - jp.bounds.max.y()),
+               oz = std::max(jp.bounds.min.z() - w.z(), w.z() - jp.bounds.max.z());
+  const double box = std::max(std::max(ox, oy), oz) <= 0 ? std::max(std::max(ox, oy), oz)
+                                                           : std::sqrt(std::max(ox, 0.0) * std::max(ox, 0.0) +
+                                                                       std::max(oy, 0.0) * std::max(oy, 0.0) +
+                                                                       std::max(oz, 0.0) * std::max(oz, 0.0));
+  return std::max(std::max(ta, tb), std::max(slab, box));
+}
+
 }  // namespace detail
 
 [[gnu::always_inline]] inline double distance_inline(const Primitive& p, const Vec3& x) {
   if (const auto* pp = std::get_if<ProfilePrim>(&p); pp && pp->prism) return detail::prism_distance(*pp, x);
+  if (const auto* jp = std::get_if<JointPrim>(&p)) return detail::joint_distance(*jp, x);
   return distance(p, x);
 }
 
