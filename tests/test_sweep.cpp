@@ -1,5 +1,6 @@
 // Swept-envelope distances against densely sampled tool poses.
 #include <cmath>
+#include <limits>
 #include <random>
 #include <string>
 #include <utility>
@@ -541,56 +542,70 @@ TEST(Sweep, VToolPrismIsItsPlanesInsideAndTheExtrusionOfItsSectionOutside) {
 
 namespace cutsim::test {
 namespace {
-// The joint piece of two consecutive straight moves of `tool` (tips a ->
-// b -> c at orientation R), with a slab of half width w.
-struct Joint {
-  sweep::Primitive first, second, joint;
+// Straight moves of `tool` through `tips` at orientation R: their prisms,
+// and the joint piece of prism `mid` with its neighbours, slab half width w.
+struct Chain {
+  std::vector<sweep::Primitive> prisms;
+  sweep::Primitive joint;
 };
-Joint joint_of(const std::string& tool, const Vec3& a, const Vec3& b, const Vec3& c, double w,
-               const Eigen::Matrix3d& R = Eigen::Matrix3d::Identity()) {
+Chain chain_of(const std::string& tool, const std::vector<Vec3>& tips, std::size_t mid, double w) {
   const tool::Tool t = tool::parse_tool_spec(tool, "test");
-  const sweep::Sweep s0 = sweep::sweep_line(a, b, R, t), s1 = sweep::sweep_line(b, c, R, t);
-  const auto j = sweep::joint_prim(std::get<sweep::ProfilePrim>(s0.prims[0]), std::get<sweep::ProfilePrim>(s1.prims[0]),
+  Chain c;
+  std::vector<sweep::ProfilePrim> pp;
+  for (std::size_t i = 0; i + 1 < tips.size(); ++i) {
+    c.prisms.push_back(sweep::sweep_line(tips[i], tips[i + 1], Eigen::Matrix3d::Identity(), t).prims[0]);
+    pp.push_back(std::get<sweep::ProfilePrim>(c.prisms.back()));
+  }
+  for (std::size_t i = 0; i + 1 < pp.size(); ++i) EXPECT_TRUE(sweep::joinable(pp[i], pp[i + 1])) << tool << " " << i;
+  const auto j = sweep::joint_prim(mid > 0 ? &pp[mid - 1] : nullptr, pp[mid], mid + 1 < pp.size() ? &pp[mid + 1] : nullptr,
                                    w, Aabb{});
   EXPECT_TRUE(j.has_value());
-  return {s0.prims[0], s1.prims[0], j ? sweep::Primitive(*j) : s0.prims[0]};
+  c.joint = j ? sweep::Primitive(*j) : c.prisms[0];
+  return c;
 }
 }  // namespace
 
-TEST(Sweep, JointPieceLiesInTheTwoPrismsAndBoundsTheirUnionsDepth) {
-  // Where one move of a V (or nose) tool follows another at the same
-  // orientation, the joint piece must hold (sweep::JointPrim): where it is
-  // negative, the ball of that radius about the point lies in the two
-  // prisms' union (its depth a lower bound of the union's; checked on 26
-  // points of the ball's surface), and where it is not, it is no nearer
-  // than the union. Kinks up and down, gentle and steep (a convex kink's
-  // far prism comes nearer than the near one's end cap would say), a bend
-  // sideways, and a round nose. At the joint itself, well inside the cut,
-  // it reaches the slab's depth, where each prism's end cap says 0.
+TEST(Sweep, JointPieceLiesInThePrismsAndBoundsTheirUnionsDepth) {
+  // Where moves of a V (or nose) tool follow each other at one orientation,
+  // a prism's joint piece with its neighbours must hold (sweep::JointPrim):
+  // where it is negative, the ball of that radius about the point lies in
+  // the prisms' union (its depth a lower bound of the union's; checked on
+  // 26 points of the ball's surface), and where it is not, it is no nearer
+  // than the union. Three moves with kinks up and down, gentle and steep (a
+  // convex kink's far prism comes nearer than the near one's end cap would
+  // say), the first or last of two, a bend sideways and a round nose.
   const double w = 0.0015;
   struct Case {
     const char* tool;
-    Vec3 a, b, c;
+    std::vector<Vec3> tips;
+    std::size_t mid;
     bool lipschitz;
   };
+  const char* v90 = "vtool:angle=90,h=0.05";
   const Case cases[] = {
-      {"vtool:angle=90,h=0.05", Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.01, 0, 0), true},          // straight
-      {"vtool:angle=90,h=0.05", Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.01, 0, 0.003), true},      // convex kink
-      {"vtool:angle=90,h=0.05", Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.01, 0, -0.003), true},     // concave
-      {"vtool:angle=60,h=0.05", Vec3(-0.002, 0, 0.006), Vec3(0, 0, 0), Vec3(0.002, 0, 0.006), true},  // steep V
-      {"vtool:angle=90,h=0.05", Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.01, 0.002, 0), false},     // sideways
-      {"nose:r=0.01", Vec3(-0.01, 0, 0.001), Vec3(0, 0, 0), Vec3(0.01, 0, 0.002), false},    // round nose
+      {v90, {Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.002, 0, 0), Vec3(0.012, 0, 0)}, 1, true},  // straight
+      {v90, {Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.002, 0, 0.0006), Vec3(0.012, 0, 0)}, 1, true},  // up, down
+      {v90, {Vec3(-0.01, 0, 0.003), Vec3(0, 0, 0), Vec3(0.002, 0, -0.0006), Vec3(0.012, 0, 0.002)}, 1, true},
+      {"vtool:angle=60,h=0.05", {Vec3(-0.002, 0, 0.006), Vec3(0, 0, 0), Vec3(0.002, 0, 0.006)}, 0, true},  // steep
+      {"vtool:angle=60,h=0.05", {Vec3(-0.002, 0, 0.006), Vec3(0, 0, 0), Vec3(0.002, 0, 0.006)}, 1, true},
+      {v90, {Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.01, 0.002, 0)}, 0, false},  // sideways
+      {"nose:r=0.01", {Vec3(-0.01, 0, 0.001), Vec3(0, 0, 0), Vec3(0.01, 0, 0.002)}, 1, false},  // round nose
   };
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(-1, 1);
   for (const Case& k : cases) {
-    const Joint j = joint_of(k.tool, k.a, k.b, k.c, w);
-    EXPECT_EQ(sweep::lipschitz(j.joint), k.lipschitz) << k.tool;
-    auto uni = [&](const Vec3& p) { return std::min(sweep::distance(j.first, p), sweep::distance(j.second, p)); };
+    const Chain c = chain_of(k.tool, k.tips, k.mid, w);
+    EXPECT_EQ(sweep::lipschitz(c.joint), k.lipschitz) << k.tool;
+    auto uni = [&](const Vec3& p) {
+      double d = std::numeric_limits<double>::infinity();
+      for (const auto& q : c.prisms) d = std::min(d, sweep::distance(q, p));
+      return d;
+    };
+    const Vec3 at = k.tips[k.mid];  // the middle prism's start
     int inside = 0;
     for (int i = 0; i < 20000; ++i) {
-      const Vec3 p(0.003 * u(rng), 0.01 * u(rng), 0.004 + 0.006 * u(rng));
-      const double g = sweep::distance(j.joint, p), un = uni(p);
+      const Vec3 p = at + Vec3(0.001 + 0.004 * u(rng), 0.01 * u(rng), 0.004 + 0.006 * u(rng));
+      const double g = sweep::distance(c.joint, p), un = uni(p);
       if (g >= 0) {
         ASSERT_GE(g, un - 1e-12) << k.tool << " outside at " << p.transpose();
         continue;
@@ -610,35 +625,35 @@ TEST(Sweep, JointPieceLiesInTheTwoPrismsAndBoundsTheirUnionsDepth) {
     if (k.lipschitz) {
       double worst = 0;
       for (int i = 0; i < 20000; ++i) {
-        const Vec3 p(0.003 * u(rng), 0.01 * u(rng), 0.004 + 0.006 * u(rng));
+        const Vec3 p = at + Vec3(0.001 + 0.004 * u(rng), 0.01 * u(rng), 0.004 + 0.006 * u(rng));
         const Vec3 q = p + 0.001 * Vec3(u(rng), u(rng), u(rng));
-        worst = std::max(worst, std::fabs(sweep::distance(j.joint, p) - sweep::distance(j.joint, q)) / (p - q).norm());
+        worst = std::max(worst, std::fabs(sweep::distance(c.joint, p) - sweep::distance(c.joint, q)) / (p - q).norm());
       }
       EXPECT_LE(worst, 1 + 1e-9) << k.tool;
     }
   }
-  // Straight on, 3 um above the tip at the joint: each prism's end cap
-  // says 0 there; the joint, the slab's half width (the flanks are 2.1 um
-  // away).
-  const Joint s = joint_of("vtool:angle=90,h=0.05", Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.01, 0, 0), w);
-  const Vec3 at(0, 0, 0.003);
-  EXPECT_EQ(sweep::distance(s.first, at), 0.0);
-  EXPECT_EQ(sweep::distance(s.second, at), 0.0);
-  EXPECT_NEAR(sweep::distance(s.joint, at), -w, 1e-15);
-  // No joint: turned, reversed, apart, or another edge.
-  const tool::Tool v = tool::parse_tool_spec("vtool:angle=90,h=0.05", "test");
+  // Straight on, 3 um above the tip, in the middle of a 2 um move: each
+  // prism's end cap says at most 1 um deep there; the joint piece, the
+  // flanks' 2.1 um (3 / sqrt 2).
+  const Chain s = chain_of(v90, {Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.002, 0, 0), Vec3(0.012, 0, 0)}, 1, w);
+  const Vec3 in(0.001, 0, 0.003);
+  for (const auto& q : s.prisms) EXPECT_GE(sweep::distance(q, in), -0.001 - 1e-15);
+  EXPECT_NEAR(sweep::distance(s.joint, in), -0.003 / std::sqrt(2.0), 1e-15);
+  // Not joinable: turned, reversed, apart, or another edge.
+  const tool::Tool v = tool::parse_tool_spec(v90, "test");
   const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
   const Eigen::Matrix3d turned = Eigen::AngleAxisd(0.1, Vec3::UnitZ()).toRotationMatrix();
   auto prism = [&](const Vec3& p0, const Vec3& p1, const Eigen::Matrix3d& R, const tool::Tool& t) {
     return std::get<sweep::ProfilePrim>(sweep::sweep_line(p0, p1, R, t).prims[0]);
   };
   const sweep::ProfilePrim first = prism(Vec3(-0.01, 0, 0), Vec3(0, 0, 0), I, v);
-  EXPECT_FALSE(sweep::joint_prim(first, prism(Vec3(0, 0, 0), Vec3(0.01, 0, 0), turned, v), w, Aabb{}));
-  EXPECT_FALSE(sweep::joint_prim(first, prism(Vec3(0, 0, 0), Vec3(-0.005, 0, 0.001), I, v), w, Aabb{}));
-  EXPECT_FALSE(sweep::joint_prim(first, prism(Vec3(0, 1e-6, 0), Vec3(0.01, 0, 0), I, v), w, Aabb{}));
-  EXPECT_FALSE(sweep::joint_prim(
-      first, prism(Vec3(0, 0, 0), Vec3(0.01, 0, 0), I, tool::parse_tool_spec("vtool:angle=60,h=0.05", "test")), w,
-      Aabb{}));
+  EXPECT_TRUE(sweep::joinable(first, prism(Vec3(0, 0, 0), Vec3(0.01, 0, 0.001), I, v)));
+  EXPECT_FALSE(sweep::joinable(first, prism(Vec3(0, 0, 0), Vec3(0.01, 0, 0), turned, v)));
+  EXPECT_FALSE(sweep::joinable(first, prism(Vec3(0, 0, 0), Vec3(-0.005, 0, 0.001), I, v)));
+  EXPECT_FALSE(sweep::joinable(first, prism(Vec3(0, 1e-6, 0), Vec3(0.01, 0, 0), I, v)));
+  EXPECT_FALSE(sweep::joinable(first, prism(Vec3(0, 0, 0), Vec3(0.01, 0, 0), I, tool::parse_tool_spec("vtool:angle=60,h=0.05", "test"))));
+  // A prism with no neighbour gets no piece.
+  EXPECT_FALSE(sweep::joint_prim(nullptr, first, nullptr, w, Aabb{}));
 }
 
 }  // namespace cutsim::test

@@ -363,10 +363,12 @@ TEST(Volume, VToolGroovesAreTheNearestPrismsDepth) {
         joints += moves.back().prims.size() - 1;
       }
     }
+    moves.push_back(join.finish());
+    joints += moves.back().prims.size();
     return moves;
   };
   const std::vector<sweep::Sweep> split = passes(5);
-  EXPECT_EQ(joints, 4u * 4u);  // within each pass, not from one pass's end to the next one's start
+  EXPECT_EQ(joints, 4u * 5u);  // each move's prism: joined within its pass, not to the next pass's start
   s.subtract(split);
   const BruteForce bf = against_brute_force(s, split, box, so.voxel_mm);
   EXPECT_GT(bf.checked, 200000u);

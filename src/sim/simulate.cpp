@@ -404,10 +404,11 @@ SimResult simulate(const SimOptions& opt) {
     pending.clear();
     pending_prims = 0;
   };
-  // A V or nose tool's consecutive moves at one orientation: each move's
-  // sweep carries the piece that closes its joint with the move before
-  // (sweep::JointPrim), whose slab is the band: deeper is clamped alike.
-  sweep::Joiner join(2 * res.voxel_mm, stock_reach);
+  // A V or nose tool's consecutive moves at one orientation: each prism's
+  // piece that closes its joints with its neighbours (sweep::JointPrim)
+  // rides with the move after it; its slab reaches the band past the
+  // prism's ends (deeper is clamped alike).
+  sweep::Joiner join(res.stock->band_mm(), stock_reach);
   InterferenceChecker::PendingCuts held;
   held.change = [&](const Vec3& p, double v) { return cuts_change_voxel(pending, *res.stock, p, v); };
   held.flush = [&] {
@@ -444,6 +445,7 @@ SimResult simulate(const SimOptions& opt) {
       opt.progress(static_cast<double>(done) / std::max(total_moves, 1), m.line);
     if (touched && stop_at_contact) throw StopAtContact{};
   });
+  if (sweep::Sweep tail = join.finish(); !tail.prims.empty()) pending.push_back(std::move(tail));
   flush();
   } catch (const InterruptedError& e) {
     if (!opt.keep_partial) throw;

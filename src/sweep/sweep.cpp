@@ -361,17 +361,21 @@ bool lipschitz(const Primitive& p) {
   return true;
 }
 
-std::optional<JointPrim> joint_prim(const ProfilePrim& a, const ProfilePrim& b, double half_width, const Aabb& reach) {
-  if (!a.prism || !b.prism || !(half_width > 0)) return std::nullopt;
+bool joinable(const ProfilePrim& a, const ProfilePrim& b) {
+  if (!a.prism || !b.prism) return false;
   if (a.to_local != b.to_local || a.edge.nose_radius != b.edge.nose_radius ||
       a.edge.half_angle != b.edge.half_angle || a.edge.height != b.edge.height)
-    return std::nullopt;
-  if ((a.d_local.x() > 0) != (b.d_local.x() > 0)) return std::nullopt;
-  const Eigen::Matrix3d Rl = a.to_local.transpose();
-  if ((a.origin + Rl * a.d_local - b.origin).norm() > 1e-9) return std::nullopt;
+    return false;
+  if ((a.d_local.x() > 0) != (b.d_local.x() > 0)) return false;
+  return (a.origin + a.to_local.transpose() * a.d_local - b.origin).norm() <= 1e-9;
+}
+
+std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim& mid, const ProfilePrim* after,
+                                    double half_width, const Aabb& reach) {
+  if ((!before && !after) || !(half_width > 0)) return std::nullopt;
   JointPrim jp;
-  jp.origin = b.origin;
-  jp.to_local = b.to_local;
+  jp.origin = mid.origin;
+  jp.to_local = mid.to_local;
   auto side = [](const ProfilePrim& p) {
     JointPrim::Side s;
     s.d = p.d_local;
@@ -381,20 +385,26 @@ std::optional<JointPrim> joint_prim(const ProfilePrim& a, const ProfilePrim& b, 
     s.f_top = p.f_top;
     return s;
   };
-  jp.before = side(a);
-  jp.after = side(b);
-  jp.edge = b.edge;
-  jp.sin_half = b.sin_half;
-  jp.cos_half = b.cos_half;
-  jp.sign = b.d_local.x() > 0 ? 1.0 : -1.0;
+  jp.mid = side(mid);
+  jp.has_before = before != nullptr;
+  jp.has_after = after != nullptr;
+  if (before) jp.before = side(*before);
+  if (after) jp.after = side(*after);
+  jp.edge = mid.edge;
+  jp.sin_half = mid.sin_half;
+  jp.cos_half = mid.cos_half;
+  jp.sign = mid.d_local.x() > 0 ? 1.0 : -1.0;
   jp.half_width = half_width;
-  jp.lipschitz = lipschitz(Primitive(a)) && lipschitz(Primitive(b));
+  jp.lipschitz = lipschitz(Primitive(mid)) && (!before || lipschitz(Primitive(*before))) &&
+                 (!after || lipschitz(Primitive(*after)));
   // Its box: the cross-sections within the slab (each prism's moves
-  // linearly, so those at its ends and at the joint hold the rest), of the
-  // part of the profile that reaches into `reach`.
-  const double ta = std::min(1.0, half_width / std::fabs(a.d_local.x())),
-               tb = std::min(1.0, half_width / std::fabs(b.d_local.x()));
-  const Vec3 tips[3] = {b.origin - ta * (Rl * a.d_local), b.origin, b.origin + tb * (Rl * b.d_local)};
+  // linearly, so those at the ends of each one's part hold the rest), of
+  // the part of the profile that reaches into `reach`.
+  const Eigen::Matrix3d Rl = mid.to_local.transpose();
+  const Vec3 end = mid.origin + Rl * mid.d_local;
+  std::vector<Vec3> tips{mid.origin, end};
+  if (before) tips.push_back(mid.origin - std::min(1.0, half_width / std::fabs(before->d_local.x())) * (Rl * before->d_local));
+  if (after) tips.push_back(end + std::min(1.0, half_width / std::fabs(after->d_local.x())) * (Rl * after->d_local));
   const tool::Shape shape(jp.edge);
   Aabb box;
   for (const Vec3& t : tips)
@@ -404,17 +414,33 @@ std::optional<JointPrim> joint_prim(const ProfilePrim& a, const ProfilePrim& b, 
   return jp;
 }
 
+void Joiner::emit(Sweep& s, const ProfilePrim* after) {
+  if (!last_) return;
+  if (auto j = joint_prim(before_ ? &*before_ : nullptr, *last_, after, half_width_, reach_)) {
+    s.bounds.extend(j->bounds);
+    s.prims.emplace_back(*j);
+  }
+}
+
 void Joiner::operator()(Sweep& s) {
-  std::optional<ProfilePrim> last;
-  if (!s.prims.empty())
-    if (const auto* p = std::get_if<ProfilePrim>(&s.prims.back())) last = *p;
-  if (last_ && !s.prims.empty())
-    if (const auto* first = std::get_if<ProfilePrim>(&s.prims.front()))
-      if (auto j = joint_prim(*last_, *first, half_width_, reach_)) {
-        s.bounds.extend(j->bounds);
-        s.prims.emplace_back(*j);
-      }
-  last_ = std::move(last);
+  const ProfilePrim* first = s.prims.empty() ? nullptr : std::get_if<ProfilePrim>(&s.prims.front());
+  const ProfilePrim* last = s.prims.empty() ? nullptr : std::get_if<ProfilePrim>(&s.prims.back());
+  const bool joins = last_ && first && joinable(*last_, *first);
+  // (s's own prisms are copied first: emit appends to s.prims.)
+  std::optional<ProfilePrim> next_before, next_last;
+  if (last) next_last = *last;
+  if (joins && s.prims.size() == 1) next_before = *last_;
+  emit(s, joins ? first : nullptr);
+  before_ = std::move(next_before);
+  last_ = std::move(next_last);
+}
+
+Sweep Joiner::finish() {
+  Sweep s;
+  emit(s, nullptr);
+  before_.reset();
+  last_.reset();
+  return s;
 }
 
 Aabb world_box(const Aabb& local, const Eigen::Matrix3d& R, const Vec3& tip) {

@@ -72,21 +72,24 @@ struct ProfilePrim {
   double inv_dx = 0;
 };
 
-/// The joint of two profile prisms that follow each other at one
-/// orientation (consecutive straight moves of a V or nose tool: joint_prim).
-/// Each prism's flat end cap lies inside the other's cut, so near the joint
-/// each measures the voxels inside their union as no deeper than the way
-/// to its cap: a sheet of near-zero values across the cut, half a voxel of
-/// its section counted as material. This piece is the intersection of the
-/// first prism drawn on past its end, the second drawn back before its
-/// start, a slab of half width `half_width` about the joint and its box:
-/// the part within the first's length lies in the first prism, the rest in
-/// the second, so it lies in their union and its depth (that of an
-/// intersection, the largest of its parts' distances) bounds the union's.
-/// Outside it is no nearer than one of the two prisms (beside the first's
-/// length the first's distance, beside the second's the second's), so it
-/// adds nothing there; its box term makes its distance no less than the
-/// way to its box.
+/// The joints of a profile prism with the ones before and after it at the
+/// same orientation (consecutive straight moves of a V or nose tool:
+/// joint_prim). Each prism's flat end cap lies inside its neighbour's cut,
+/// so near every joint both measure the voxels inside their union as no
+/// deeper than the way to the cap: a sheet of near-zero values across the
+/// cut (half a voxel of its section counted as material), and a band as
+/// thick as the cut where moves are shorter than the band. This piece is
+/// the intersection of the middle prism drawn on both ways (capped where
+/// it has no neighbour), the one before drawn on past its end, the one
+/// after drawn back before its start, a slab reaching `half_width` past
+/// the middle one's ends and its box. Its part beside each prism's length
+/// lies in that prism, so it lies in their union, and its depth (that of
+/// an intersection: the largest of its parts' distances) bounds the
+/// union's. Outside it is no nearer than one of the prisms (beside each
+/// one's length, or beyond the first's start or the last's end, that
+/// one's distance is one of its parts), so only its inside matters
+/// (interior_only); its box term makes its distance no less than the way
+/// to its box.
 struct JointPrim {
   /// One prism's move in the shared frame, with ProfilePrim's factors.
   struct Side {
@@ -94,14 +97,15 @@ struct JointPrim {
     double inv_dx = 0;
     double f_side[2] = {1, 1}, f_top = 1;
   };
-  Vec3 origin;               ///< the joint: the first prism's end, the second's start
+  Vec3 origin;               ///< the middle prism's start
   Eigen::Matrix3d to_local;  ///< the prisms' (the same)
-  Side before, after;
+  Side before, mid, after;   ///< before ends at origin; after starts at origin + mid.d (local)
+  bool has_before = false, has_after = false;
   tool::EdgeProfile edge;
   double sin_half = 0, cos_half = 1;
-  double sign = 1;        ///< +1 where both moves run along the frame's +x, -1 along -x
-  double half_width = 0;  ///< the slab's, along x
-  bool lipschitz = false; ///< both prisms' distances are (sweep::lipschitz)
+  double sign = 1;        ///< +1 where the moves run along the frame's +x, -1 along -x
+  double half_width = 0;  ///< how far the slab reaches past the middle prism's ends, along x
+  bool lipschitz = false; ///< the prisms' distances are (sweep::lipschitz)
   Aabb bounds;
 };
 
@@ -233,26 +237,35 @@ Aabb world_box_within(const tool::Shape& shape, const Eigen::Matrix3d& R, const 
 /// points within `reach` up to `reach`'s distance from their outside.
 void clip_bounds(Sweep& s, const Aabb& reach);
 
-/// The piece that closes the joint of `a` and `b` (JointPrim), `b` starting
-/// where `a` ends, with a slab of `half_width` (the stock's band: deeper
-/// values are clamped alike) and its box within `reach` (none: unbounded);
-/// nothing where they are not two prisms of one edge at one orientation,
-/// running the same way along it, within 1e-9 mm of each other at the joint.
-std::optional<JointPrim> joint_prim(const ProfilePrim& a, const ProfilePrim& b, double half_width, const Aabb& reach);
+/// True where `b` starts where `a` ends (within 1e-9 mm), both prisms of
+/// one edge at one orientation running the same way along it: the two can
+/// share a JointPrim.
+bool joinable(const ProfilePrim& a, const ProfilePrim& b);
 
-/// Adds to each sweep it is given the joint (joint_prim) of the last piece
-/// of the sweep before and its own first: consecutive moves of a V or nose
-/// tool at one orientation. The sweeps must come in the program's order,
-/// every move's (an empty sweep breaks the chain).
+/// The piece for `mid` and its neighbours (JointPrim; each may be null, and
+/// must be joinable with `mid` where it is not), with its slab reaching
+/// `half_width` past `mid`'s ends (the stock's band: deeper values are
+/// clamped alike) and its box within `reach` (empty: unbounded); nothing
+/// where it has no neighbour or no box.
+std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim& mid, const ProfilePrim* after,
+                                    double half_width, const Aabb& reach);
+
+/// Gives each prism of consecutive moves its JointPrim: the sweeps must
+/// come in the program's order, every move's (an empty sweep breaks the
+/// chain). A prism's piece needs the move after it, so it is added to that
+/// move's sweep, and the last one's to what `finish` returns.
 class Joiner {
  public:
   Joiner(double half_width, const Aabb& reach) : half_width_(half_width), reach_(reach) {}
   void operator()(Sweep& s);
+  /// The last prism's piece, once the moves have ended (empty if none).
+  Sweep finish();
 
  private:
+  void emit(Sweep& s, const ProfilePrim* after);
   double half_width_;
   Aabb reach_;
-  std::optional<ProfilePrim> last_;
+  std::optional<ProfilePrim> before_, last_;  // the last prism and the one before it, where joinable
 };
 
 /// Fly-cutter revolutions: the swing torus at each pose.
@@ -410,36 +423,46 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   return prism_sd(a, b);
 }
 
-// A joint's distance (JointPrim): the largest of the first prism's
-// (drawn on past its end: only its start capped), the second's (drawn back:
-// only its end capped), the slab's and the box's.
+// One prism of a JointPrim, starting at (ox, oy, oz) in the shared frame,
+// drawn on past its ends but where `start_cap`, `end_cap`.
+[[gnu::always_inline]] inline double joint_part(const JointPrim& jp, const JointPrim::Side& sd, double ux, double uy,
+                                                double uz, double ox, double oy, double oz, bool start_cap,
+                                                bool end_cap) {
+  const double x = ux - ox;
+  double s = x * sd.inv_dx;
+  if (start_cap) s = std::max(s, 0.0);
+  if (end_cap) s = std::min(s, 1.0);
+  const double a = prism_section(jp.edge, jp.sin_half, jp.cos_half, sd.d, sd.f_side, sd.f_top,
+                                 uy - oy - s * sd.d.y(), uz - oz - s * sd.d.z());
+  constexpr double kOpen = -std::numeric_limits<double>::infinity();
+  const double b = std::max(start_cap ? -jp.sign * x : kOpen, end_cap ? jp.sign * (x - sd.d.x()) : kOpen);
+  return b == kOpen ? a : prism_sd(a, b);
+}
+
+// A JointPrim's distance: the largest of its prisms', the slab's and the box's.
 [[gnu::always_inline]] inline double joint_distance(const JointPrim& jp, const Vec3& w) {
   const double rx = w.x() - jp.origin.x(), ry = w.y() - jp.origin.y(), rz = w.z() - jp.origin.z();
   const Eigen::Matrix3d& m = jp.to_local;
   const double ux = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, uy = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
                uz = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
-  const JointPrim::Side& a = jp.before;
-  const JointPrim::Side& b = jp.after;
-  const tool::EdgeProfile& e = jp.edge;
-  // The first prism starts at -a.d.
-  const double xa = ux + a.d.x(), sa = std::max(xa * a.inv_dx, 0.0);
-  const double ta = prism_sd(prism_section(e, jp.sin_half, jp.cos_half, a.d, a.f_side, a.f_top,
-                                           uy + a.d.y() - sa * a.d.y(), uz + a.d.z() - sa * a.d.z()),
-                             -jp.sign * xa);
-  const double sb = std::min(ux * b.inv_dx, 1.0);
-  const double tb = prism_sd(
-      prism_section(e, jp.sin_half, jp.cos_half, b.d, b.f_side, b.f_top, uy - sb * b.d.y(), uz - sb * b.d.z()),
-      jp.sign * (ux - b.d.x()));
-  const double slab = std::fabs(ux) - jp.half_width;
+  const Vec3& dm = jp.mid.d;
+  double g = joint_part(jp, jp.mid, ux, uy, uz, 0, 0, 0, !jp.has_before, !jp.has_after);
+  if (jp.has_before) {
+    const Vec3& db = jp.before.d;
+    g = std::max(g, joint_part(jp, jp.before, ux, uy, uz, -db.x(), -db.y(), -db.z(), true, false));
+  }
+  if (jp.has_after) g = std::max(g, joint_part(jp, jp.after, ux, uy, uz, dm.x(), dm.y(), dm.z(), false, true));
+  const double along = jp.sign * ux;
+  const double slab = std::max(-jp.half_width - along, along - jp.sign * dm.x() - jp.half_width);
   // The box's signed distance.
   const double ox = std::max(jp.bounds.min.x() - w.x(), w.x() - jp.bounds.max.x()),
                oy = std::max(jp.bounds.min.y() - w.y(), w.y() - jp.bounds.max.y()),
                oz = std::max(jp.bounds.min.z() - w.z(), w.z() - jp.bounds.max.z());
-  const double box = std::max(std::max(ox, oy), oz) <= 0 ? std::max(std::max(ox, oy), oz)
-                                                           : std::sqrt(std::max(ox, 0.0) * std::max(ox, 0.0) +
-                                                                       std::max(oy, 0.0) * std::max(oy, 0.0) +
-                                                                       std::max(oz, 0.0) * std::max(oz, 0.0));
-  return std::max(std::max(ta, tb), std::max(slab, box));
+  const double om = std::max(std::max(ox, oy), oz);
+  const double box = om <= 0 ? om
+                             : std::sqrt(std::max(ox, 0.0) * std::max(ox, 0.0) + std::max(oy, 0.0) * std::max(oy, 0.0) +
+                                         std::max(oz, 0.0) * std::max(oz, 0.0));
+  return std::max(std::max(g, slab), box);
 }
 
 }  // namespace detail
