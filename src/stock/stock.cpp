@@ -933,7 +933,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
                 if (b2 > 0 && (need <= 0 || b2 >= need * need)) return;
                 bounded = !reuse0;
               }
-              cut_voxel(idx, v, sweep::distance_inline(p0, p));
+              if (!inner) {
+                cut_voxel(idx, v, sweep::distance_inline(p0, p));
+              } else if (const double d = sweep::distance_below(p0, p, need); d < need) {
+                cut_voxel(idx, v, d);  // (else only a bound, and the voxel stays)
+              }
             });
             continue;
           }
@@ -988,10 +992,20 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             // than the nearest piece so far) cannot matter.
             double d = std::numeric_limits<double>::infinity();
             std::size_t best = none;
-            auto eval = [&](std::size_t j) {
+            // (`lim`: a joint's value at or above it is only a bound, and
+            // not a candidate.)
+            auto eval = [&](std::size_t j, double lim) {
               Near& n = near[j];
               double dj;
-              if (!reuse) {
+              if (n.inner) {
+                dj = sweep::distance_below(*n.prim, p, lim);
+                if (reuse) {
+                  n.bound = Near::cone;
+                  n.c = dj;
+                  n.at = y;
+                }
+                if (dj >= lim) return;
+              } else if (!reuse) {
                 dj = sweep::distance_inline(*n.prim, p);
               } else if (sweep::convex_distance(*n.prim, p, &dj, &n.grad)) {
                 n.bound = Near::plane;
@@ -1007,7 +1021,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
                 best = j;
               }
             };
-            if (nearest != none) eval(nearest);
+            if (nearest != none) eval(nearest, near[nearest].inner ? std::min(need, 0.0) : need);
             for (std::size_t j = 0; j < near.size() && d > -g; ++j) {  // at -g: clamped to air whatever the rest
               const double thr = std::min(d, need);
               const Near& n = near[j];
@@ -1037,7 +1051,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               }
               const double b2 = box_distance2(*n.box, p);
               if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) continue;
-              eval(j);
+              eval(j, lim);
             }
             if (reuse && best != none) nearest = best;
             ++evaluated;

@@ -439,30 +439,40 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   return b == kOpen ? a : prism_sd(a, b);
 }
 
-// A JointPrim's distance: the largest of its prisms', the slab's and the box's.
-[[gnu::always_inline]] inline double joint_distance(const JointPrim& jp, const Vec3& w) {
-  const double rx = w.x() - jp.origin.x(), ry = w.y() - jp.origin.y(), rz = w.z() - jp.origin.z();
-  const Eigen::Matrix3d& m = jp.to_local;
-  const double ux = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, uy = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
-               uz = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
-  const Vec3& dm = jp.mid.d;
-  double g = joint_part(jp, jp.mid, ux, uy, uz, 0, 0, 0, !jp.has_before, !jp.has_after);
-  if (jp.has_before) {
-    const Vec3& db = jp.before.d;
-    g = std::max(g, joint_part(jp, jp.before, ux, uy, uz, -db.x(), -db.y(), -db.z(), true, false));
-  }
-  if (jp.has_after) g = std::max(g, joint_part(jp, jp.after, ux, uy, uz, dm.x(), dm.y(), dm.z(), false, true));
-  const double along = jp.sign * ux;
-  const double slab = std::max(-jp.half_width - along, along - jp.sign * dm.x() - jp.half_width);
+// A JointPrim's distance, the largest of its box's, the slab's and its
+// prisms' (the middle one's first), where that is below `lim`; else a value
+// no more than it and no less than `lim`, from the parts worked out until
+// one reached `lim`.
+[[gnu::always_inline]] inline double joint_distance_below(const JointPrim& jp, const Vec3& w, double lim) {
   // The box's signed distance.
   const double ox = std::max(jp.bounds.min.x() - w.x(), w.x() - jp.bounds.max.x()),
                oy = std::max(jp.bounds.min.y() - w.y(), w.y() - jp.bounds.max.y()),
                oz = std::max(jp.bounds.min.z() - w.z(), w.z() - jp.bounds.max.z());
   const double om = std::max(std::max(ox, oy), oz);
-  const double box = om <= 0 ? om
-                             : std::sqrt(std::max(ox, 0.0) * std::max(ox, 0.0) + std::max(oy, 0.0) * std::max(oy, 0.0) +
-                                         std::max(oz, 0.0) * std::max(oz, 0.0));
-  return std::max(std::max(g, slab), box);
+  double g = om <= 0 ? om
+                     : std::sqrt(std::max(ox, 0.0) * std::max(ox, 0.0) + std::max(oy, 0.0) * std::max(oy, 0.0) +
+                                 std::max(oz, 0.0) * std::max(oz, 0.0));
+  const double rx = w.x() - jp.origin.x(), ry = w.y() - jp.origin.y(), rz = w.z() - jp.origin.z();
+  const Eigen::Matrix3d& m = jp.to_local;
+  const double ux = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, uy = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
+               uz = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
+  const Vec3& dm = jp.mid.d;
+  const double along = jp.sign * ux;
+  g = std::max(g, std::max(-jp.half_width - along, along - jp.sign * dm.x() - jp.half_width));  // the slab
+  if (g >= lim) return g;
+  g = std::max(g, joint_part(jp, jp.mid, ux, uy, uz, 0, 0, 0, !jp.has_before, !jp.has_after));
+  if (g >= lim) return g;
+  if (jp.has_before) {
+    const Vec3& db = jp.before.d;
+    g = std::max(g, joint_part(jp, jp.before, ux, uy, uz, -db.x(), -db.y(), -db.z(), true, false));
+  }
+  if (jp.has_after) g = std::max(g, joint_part(jp, jp.after, ux, uy, uz, dm.x(), dm.y(), dm.z(), false, true));
+  return g;
+}
+
+// A JointPrim's distance.
+[[gnu::always_inline]] inline double joint_distance(const JointPrim& jp, const Vec3& w) {
+  return joint_distance_below(jp, w, std::numeric_limits<double>::infinity());
 }
 
 }  // namespace detail
@@ -471,6 +481,14 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   if (const auto* pp = std::get_if<ProfilePrim>(&p); pp && pp->prism) return detail::prism_distance(*pp, x);
   if (const auto* jp = std::get_if<JointPrim>(&p)) return detail::joint_distance(*jp, x);
   return distance(p, x);
+}
+
+/// For a piece whose inside only matters (interior_only): its distance
+/// where that is below `lim`, else a value no less than `lim` and no more
+/// than its distance (a bound, for less work).
+[[gnu::always_inline]] inline double distance_below(const Primitive& p, const Vec3& x, double lim) {
+  if (const auto* jp = std::get_if<JointPrim>(&p)) return detail::joint_distance_below(*jp, x, lim);
+  return distance_inline(p, x);
 }
 
 /// A fly-cutter torus's distance (what `distance` gives for it).
