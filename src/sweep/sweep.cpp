@@ -341,6 +341,11 @@ double distance(const Primitive& p, const Vec3& x) {
   }, p);
 }
 
+double distance_below(const Primitive& p, const Vec3& x, double lim) {
+  if (const auto* jp = std::get_if<JointPrim>(&p)) return detail::joint_distance_below(*jp, x, lim);
+  return distance(p, x);
+}
+
 const Aabb& bounds(const Primitive& p) {
   return std::visit([](const auto& q) -> const Aabb& { return q.bounds; }, p);
 }

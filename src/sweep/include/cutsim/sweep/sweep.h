@@ -479,17 +479,15 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
 
 [[gnu::always_inline]] inline double distance_inline(const Primitive& p, const Vec3& x) {
   if (const auto* pp = std::get_if<ProfilePrim>(&p); pp && pp->prism) return detail::prism_distance(*pp, x);
-  if (const auto* jp = std::get_if<JointPrim>(&p)) return detail::joint_distance(*jp, x);
   return distance(p, x);
 }
 
 /// For a piece whose inside only matters (interior_only): its distance
 /// where that is below `lim`, else a value no less than `lim` and no more
-/// than its distance (a bound, for less work).
-[[gnu::always_inline]] inline double distance_below(const Primitive& p, const Vec3& x, double lim) {
-  if (const auto* jp = std::get_if<JointPrim>(&p)) return detail::joint_distance_below(*jp, x, lim);
-  return distance_inline(p, x);
-}
+/// than its distance (a bound, for less work). Not inlined: in the stock
+/// update's loops the three prisms' code crowded out the rest (raster40k,
+/// which has no joints, lost 8 % of its voxel step to it).
+double distance_below(const Primitive& p, const Vec3& x, double lim);
 
 /// A fly-cutter torus's distance (what `distance` gives for it).
 [[gnu::always_inline]] inline double torus_distance(const TorusPrim& tp, const Vec3& x) {
