@@ -409,6 +409,10 @@ SimResult simulate(const SimOptions& opt) {
   // rides with the move after it; its slab reaches the band past the
   // prism's ends (deeper is clamped alike).
   sweep::Joiner join(res.stock->band_mm(), stock_reach);
+  auto cut_tail = [&] {  // the last prism's piece, once no move follows
+    if (sweep::Sweep tail = join.finish(); !tail.prims.empty()) pending.push_back(std::move(tail));
+    flush();
+  };
   InterferenceChecker::PendingCuts held;
   held.change = [&](const Vec3& p, double v) { return cuts_change_voxel(pending, *res.stock, p, v); };
   held.flush = [&] {
@@ -443,10 +447,12 @@ SimResult simulate(const SimOptions& opt) {
     ++done;
     if (opt.progress && (done % 64 == 0 || done == total_moves))
       opt.progress(static_cast<double>(done) / std::max(total_moves, 1), m.line);
-    if (touched && stop_at_contact) throw StopAtContact{};
+    if (touched && stop_at_contact) {
+      cut_tail();
+      throw StopAtContact{};
+    }
   });
-  if (sweep::Sweep tail = join.finish(); !tail.prims.empty()) pending.push_back(std::move(tail));
-  flush();
+  cut_tail();
   } catch (const InterruptedError& e) {
     if (!opt.keep_partial) throw;
     res.interrupted = true;

@@ -1026,8 +1026,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               const double thr = std::min(d, need);
               const Near& n = near[j];
               if (n.key - off >= thr) break;  // and every piece after it
-              // (A joint's outside is no nearer than its two prisms: it
-              // matters only where it is negative.)
+              // (A joint's outside is no nearer than its prisms: it matters
+              // only where it is negative.)
               const double lim = n.inner ? std::min(thr, 0.0) : thr;
               if (n.inner && n.key - off >= lim) continue;
               if (j % kRun == 0) {
