@@ -379,10 +379,10 @@ std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim
                                     double half_width, const Aabb& reach) {
   if ((!before && !after) || !(half_width > 0)) return std::nullopt;
   JointPrim jp;
-  jp.origin = mid.origin;
   jp.to_local = mid.to_local;
   auto side = [](const ProfilePrim& p) {
     JointPrim::Side s;
+    s.origin = p.origin;
     s.d = p.d_local;
     s.inv_dx = p.inv_dx;
     s.f_side[0] = p.f_side[0];

@@ -91,15 +91,16 @@ struct ProfilePrim {
 /// (interior_only); its box term makes its distance no less than the way
 /// to its box.
 struct JointPrim {
-  /// One prism's move in the shared frame, with ProfilePrim's factors.
+  /// One prism: its start and its move in the shared frame, with
+  /// ProfilePrim's factors (so that each part is worked out as the prism's
+  /// own distance is, to the bit).
   struct Side {
-    Vec3 d;
+    Vec3 origin, d;
     double inv_dx = 0;
     double f_side[2] = {1, 1}, f_top = 1;
   };
-  Vec3 origin;               ///< the middle prism's start
   Eigen::Matrix3d to_local;  ///< the prisms' (the same)
-  Side before, mid, after;   ///< before ends at origin; after starts at origin + mid.d (local)
+  Side before, mid, after;   ///< before ends where mid starts, after starts where it ends
   bool has_before = false, has_after = false;
   tool::EdgeProfile edge;
   double sin_half = 0, cos_half = 1;
@@ -419,21 +420,38 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   const double b = d.x() > 0 ? std::max(-px, px - d.x()) : std::max(px, d.x() - px);
   // prism_sd(a, b), without its root where b <= 0 (inside the piece's
   // length): sqrt(a * a) is a to the bit (round to nearest), above 1e-150.
-  if (b <= 0 && !(a > 0 && a < 1e-150)) return (a > 0 ? a : 0.0) + std::min(std::max(a, b), 0.0);
-  return prism_sd(a, b);
+  double r = b <= 0 && !(a > 0 && a < 1e-150) ? (a > 0 ? a : 0.0) + std::min(std::max(a, b), 0.0) : prism_sd(a, b);
+  // Outside, no less than the way to the piece's box: a sheared prism's
+  // first-order distance can fall a little below it (below the apex, in
+  // the far band), where the stock update's box test, a true bound, would
+  // then pass over a voxel the distance would lower, and the voxel would
+  // depend on the order its pieces are tried in. (Still 1-Lipschitz: the
+  // box's distance is 0 on the piece's surface.)
+  if (r > 0) {
+    const Aabb& bx = pp.bounds;
+    const double dx = std::max(std::max(bx.min.x() - w.x(), w.x() - bx.max.x()), 0.0),
+                 dy = std::max(std::max(bx.min.y() - w.y(), w.y() - bx.max.y()), 0.0),
+                 dz = std::max(std::max(bx.min.z() - w.z(), w.z() - bx.max.z()), 0.0);
+    const double b2 = dx * dx + dy * dy + dz * dz;
+    if (b2 > r * r) r = std::sqrt(b2);
+  }
+  return r;
 }
 
-// One prism of a JointPrim, starting at (ox, oy, oz) in the shared frame,
-// drawn on past its ends but where `start_cap`, `end_cap`.
-[[gnu::always_inline]] inline double joint_part(const JointPrim& jp, const JointPrim::Side& sd, double ux, double uy,
-                                                double uz, double ox, double oy, double oz, bool start_cap,
-                                                bool end_cap) {
-  const double x = ux - ox;
+// One prism of a JointPrim at w, drawn on past its ends but where
+// `start_cap`, `end_cap`: the arithmetic of prism_distance, so that beside
+// the prism's length it is that prism's distance to the bit.
+[[gnu::always_inline]] inline double joint_part(const JointPrim& jp, const JointPrim::Side& sd, const Vec3& w,
+                                                bool start_cap, bool end_cap) {
+  const double rx = w.x() - sd.origin.x(), ry = w.y() - sd.origin.y(), rz = w.z() - sd.origin.z();
+  const Eigen::Matrix3d& m = jp.to_local;
+  const double x = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, y = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
+               z = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
   double s = x * sd.inv_dx;
   if (start_cap) s = std::max(s, 0.0);
   if (end_cap) s = std::min(s, 1.0);
-  const double a = prism_section(jp.edge, jp.sin_half, jp.cos_half, sd.d, sd.f_side, sd.f_top,
-                                 uy - oy - s * sd.d.y(), uz - oz - s * sd.d.z());
+  const double a =
+      prism_section(jp.edge, jp.sin_half, jp.cos_half, sd.d, sd.f_side, sd.f_top, y - s * sd.d.y(), z - s * sd.d.z());
   constexpr double kOpen = -std::numeric_limits<double>::infinity();
   const double b = std::max(start_cap ? -jp.sign * x : kOpen, end_cap ? jp.sign * (x - sd.d.x()) : kOpen);
   return b == kOpen ? a : prism_sd(a, b);
@@ -452,21 +470,15 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   double g = om <= 0 ? om
                      : std::sqrt(std::max(ox, 0.0) * std::max(ox, 0.0) + std::max(oy, 0.0) * std::max(oy, 0.0) +
                                  std::max(oz, 0.0) * std::max(oz, 0.0));
-  const double rx = w.x() - jp.origin.x(), ry = w.y() - jp.origin.y(), rz = w.z() - jp.origin.z();
   const Eigen::Matrix3d& m = jp.to_local;
-  const double ux = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, uy = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
-               uz = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
-  const Vec3& dm = jp.mid.d;
-  const double along = jp.sign * ux;
-  g = std::max(g, std::max(-jp.half_width - along, along - jp.sign * dm.x() - jp.half_width));  // the slab
+  const double along = jp.sign * (m(0, 0) * (w.x() - jp.mid.origin.x()) + m(0, 1) * (w.y() - jp.mid.origin.y()) +
+                                  m(0, 2) * (w.z() - jp.mid.origin.z()));
+  g = std::max(g, std::max(-jp.half_width - along, along - jp.sign * jp.mid.d.x() - jp.half_width));  // the slab
   if (g >= lim) return g;
-  g = std::max(g, joint_part(jp, jp.mid, ux, uy, uz, 0, 0, 0, !jp.has_before, !jp.has_after));
+  g = std::max(g, joint_part(jp, jp.mid, w, !jp.has_before, !jp.has_after));
   if (g >= lim) return g;
-  if (jp.has_before) {
-    const Vec3& db = jp.before.d;
-    g = std::max(g, joint_part(jp, jp.before, ux, uy, uz, -db.x(), -db.y(), -db.z(), true, false));
-  }
-  if (jp.has_after) g = std::max(g, joint_part(jp, jp.after, ux, uy, uz, dm.x(), dm.y(), dm.z(), false, true));
+  if (jp.has_before) g = std::max(g, joint_part(jp, jp.before, w, true, false));
+  if (jp.has_after) g = std::max(g, joint_part(jp, jp.after, w, false, true));
   return g;
 }
 
