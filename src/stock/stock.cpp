@@ -376,15 +376,6 @@ Stock::~Stock() = default;
 Stock::Stock(Stock&&) noexcept = default;
 Stock& Stock::operator=(Stock&&) noexcept = default;
 
-namespace {
-// Squared distance from p to the box (0 inside).
-[[gnu::always_inline]] inline double box_distance2(const Aabb& b, const Vec3& p) {
-  const double dx = std::max(std::max(b.min.x() - p.x(), p.x() - b.max.x()), 0.0);
-  const double dy = std::max(std::max(b.min.y() - p.y(), p.y() - b.max.y()), 0.0);
-  const double dz = std::max(std::max(b.min.z() - p.z(), p.z() - b.max.z()), 0.0);
-  return dx * dx + dy * dy + dz * dz;
-}
-}  // namespace
 
 void Stock::subtract(const sweep::Sweep& sw) {
   std::vector<const sweep::Primitive*> prims;
@@ -860,7 +851,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           sub.clear();
           for (std::size_t k = 0; k < cand.size(); ++k) {
             if (ckey[k] - oc - hd_sub >= need_max) break;  // and every piece after it
-            const double b2 = box_distance2(cbox[k], cb);
+            const double b2 = sweep::detail::box_distance2(cbox[k], cb);
             const bool inner = sweep::interior_only(*cand[k]);  // matters only where negative
             const double reach = (inner ? std::min(need_max, 0.0) : need_max) + hd_sub;
             if (b2 > 0 && (reach <= 0 || b2 >= reach * reach)) continue;
@@ -929,7 +920,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               ++evaluated;
               if (bounded) {
                 if (seeded && c0 + g0.dot(quarter_y[q]) >= need) return;
-                const double b2 = box_distance2(box0, p);
+                const double b2 = sweep::detail::box_distance2(box0, p);
                 if (b2 > 0 && (need <= 0 || b2 >= need * need)) return;
                 bounded = !reuse0;
               }
@@ -1049,7 +1040,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
                 const double margin = n.c - lim;
                 if (margin >= 0 && margin * margin >= (y - n.at).squaredNorm()) continue;
               }
-              const double b2 = box_distance2(*n.box, p);
+              const double b2 = sweep::detail::box_distance2(*n.box, p);
               if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) continue;
               eval(j, lim);
             }

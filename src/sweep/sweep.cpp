@@ -407,13 +407,15 @@ std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim
   // the part of the profile that reaches into `reach`.
   const Eigen::Matrix3d Rl = mid.to_local.transpose();
   const Vec3 end = mid.origin + Rl * mid.d_local;
-  std::vector<Vec3> tips{mid.origin, end};
-  if (before) tips.push_back(mid.origin - std::min(1.0, half_width / std::fabs(before->d_local.x())) * (Rl * before->d_local));
-  if (after) tips.push_back(end + std::min(1.0, half_width / std::fabs(after->d_local.x())) * (Rl * after->d_local));
   const tool::Shape shape(jp.edge);
   Aabb box;
-  for (const Vec3& t : tips)
+  auto section = [&](const Vec3& t) {
     box.extend(reach.empty() ? world_box(tool::shape_bounds(shape), Rl, t) : world_box_within(shape, Rl, t, reach));
+  };
+  section(mid.origin);
+  section(end);
+  if (before) section(mid.origin - std::min(1.0, half_width / std::fabs(before->d_local.x())) * (Rl * before->d_local));
+  if (after) section(end + std::min(1.0, half_width / std::fabs(after->d_local.x())) * (Rl * after->d_local));
   jp.bounds = reach.empty() ? box : box.intersected(reach);
   if (jp.bounds.empty()) return std::nullopt;
   return jp;

@@ -284,6 +284,15 @@ namespace detail {
 
 [[gnu::always_inline]] inline double clamp01(double t) { return t < 0 ? 0 : (t > 1 ? 1 : t); }
 
+// The squared distance from p to the box (0 inside): what the stock
+// update's box tests, a prism's distance and a joint's box term take.
+[[gnu::always_inline]] inline double box_distance2(const Aabb& b, const Vec3& p) {
+  const double dx = std::max(std::max(b.min.x() - p.x(), p.x() - b.max.x()), 0.0);
+  const double dy = std::max(std::max(b.min.y() - p.y(), p.y() - b.max.y()), 0.0);
+  const double dz = std::max(std::max(b.min.z() - p.z(), p.z() - b.max.z()), 0.0);
+  return dx * dx + dy * dy + dz * dz;
+}
+
 // Written on scalars (in Eigen's order of operations, so the values are
 // those of the Eigen expressions to the bit): inlined, the Eigen
 // expressions were not.
@@ -428,11 +437,7 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   // depend on the order its pieces are tried in. (Still 1-Lipschitz: the
   // box's distance is 0 on the piece's surface.)
   if (r > 0) {
-    const Aabb& bx = pp.bounds;
-    const double dx = std::max(std::max(bx.min.x() - w.x(), w.x() - bx.max.x()), 0.0),
-                 dy = std::max(std::max(bx.min.y() - w.y(), w.y() - bx.max.y()), 0.0),
-                 dz = std::max(std::max(bx.min.z() - w.z(), w.z() - bx.max.z()), 0.0);
-    const double b2 = dx * dx + dy * dy + dz * dz;
+    const double b2 = box_distance2(pp.bounds, w);
     if (b2 > r * r) r = std::sqrt(b2);
   }
   return r;
@@ -462,14 +467,12 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
 // no more than it and no less than `lim`, from the parts worked out until
 // one reached `lim`.
 [[gnu::always_inline]] inline double joint_distance_below(const JointPrim& jp, const Vec3& w, double lim) {
-  // The box's signed distance.
-  const double ox = std::max(jp.bounds.min.x() - w.x(), w.x() - jp.bounds.max.x()),
-               oy = std::max(jp.bounds.min.y() - w.y(), w.y() - jp.bounds.max.y()),
-               oz = std::max(jp.bounds.min.z() - w.z(), w.z() - jp.bounds.max.z());
-  const double om = std::max(std::max(ox, oy), oz);
-  double g = om <= 0 ? om
-                     : std::sqrt(std::max(ox, 0.0) * std::max(ox, 0.0) + std::max(oy, 0.0) * std::max(oy, 0.0) +
-                                 std::max(oz, 0.0) * std::max(oz, 0.0));
+  // The box's signed distance: inside, the way to its nearest face.
+  const Aabb& bx = jp.bounds;
+  const double om = std::max(std::max(std::max(bx.min.x() - w.x(), w.x() - bx.max.x()),
+                                      std::max(bx.min.y() - w.y(), w.y() - bx.max.y())),
+                             std::max(bx.min.z() - w.z(), w.z() - bx.max.z()));
+  double g = om <= 0 ? om : std::sqrt(box_distance2(bx, w));
   const Eigen::Matrix3d& m = jp.to_local;
   const double along = jp.sign * (m(0, 0) * (w.x() - jp.mid.origin.x()) + m(0, 1) * (w.y() - jp.mid.origin.y()) +
                                   m(0, 2) * (w.z() - jp.mid.origin.z()));
