@@ -214,7 +214,7 @@ TEST(Cli, ContactsPrintByLineAndExitOne) {
   const int code = run_cli("run " + prog + " --tools " + tbl + " --stock-box -3,-3,-3,3,3,0 --voxel 0.02 -o " + outdir,
                            &out, &err);
   EXPECT_EQ(code, 1) << out << err;
-  EXPECT_NE(out.find(prog + ":3: shank contact at least 60 um deep at ("), std::string::npos) << out;
+  EXPECT_NE(out.find(prog + ":3: shank contact at least 40 um deep at ("), std::string::npos) << out;
   EXPECT_NE(out.find("): G1 Z-1.5 F100\n"), std::string::npos) << out;
   // Pulling the buried shank out with a rapid touches too.
   EXPECT_NE(out.find(prog + ":4: rapid contact (shank)"), std::string::npos) << out;

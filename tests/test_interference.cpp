@@ -418,7 +418,7 @@ TEST(Interference, RapidThroughTheStockIsFlaggedAndARapidAboveIsNot) {
   EXPECT_TRUE(r.contacts[0].rapid);
   EXPECT_EQ(r.contacts[0].region, "cutter");
   EXPECT_TRUE(r.contacts[0].at_least);  // 0.5 mm deep: past the band
-  EXPECT_EQ(sim::format_contact(r.contacts[0], "prog.nc").rfind("prog.nc:4: rapid contact (cutter) at least 60 um deep at (", 0), 0u);
+  EXPECT_EQ(sim::format_contact(r.contacts[0], "prog.nc").rfind("prog.nc:4: rapid contact (cutter) at least 40 um deep at (", 0), 0u);
 }
 
 // A fly-cutter (spindle along Y) fed along X leaves one swing-radius arc
@@ -466,7 +466,7 @@ TEST(Interference, FlyCutterFlywheelAndArborTouchWhereTheSwingDoesNotClear) {
   ASSERT_FALSE(arbor.contacts.empty());
   EXPECT_EQ(arbor.contacts[0].line, 3);
   EXPECT_EQ(arbor.contacts[0].region, "shank");
-  EXPECT_GE(arbor.contacts[0].where.y(), 1.0 - 0.02);                // behind the flywheel
+  EXPECT_GE(arbor.contacts[0].where.y(), 0.5);  // behind the flywheel (its back face at holder_l / 2)
   EXPECT_LE(arbor.contacts[0].where.z(), 0.0);
   EXPECT_GE(arbor.contacts[0].where.z(), -4 + 5 - 5.0 / 3 - 0.02);  // above the arbor's underside
   EXPECT_TRUE(run("G0 X1 Y-8 Z-1.5\nS1000 M3\nG1 Y8 F1000\nG0 Z1\nM30\n").contacts.empty());

@@ -17,7 +17,13 @@ namespace cutsim::stock {
 
 struct StockOptions {
   double voxel_mm = 0.01;        ///< voxel edge length, mm
-  double half_band_voxels = 3;   ///< narrow band half width, voxels
+  /// Narrow band half width, voxels. Two are all anything reads: the
+  /// volumes count values within half a voxel of the surface, the mesher
+  /// and its normals one and a half voxels; only a contact's depth
+  /// saturates at it ("at least"). Three (OpenVDB's usual width) gave the
+  /// same volumes to 1e-12 for half again the active voxels (snowflake
+  /// 10 %, blade at 1 um 15 %, raster40k 20 % slower).
+  double half_band_voxels = 2;
   /// Refuse to build a grid whose estimated memory exceeds this, bytes;
   /// 0 = 75 % of physical memory.
   std::size_t memory_limit_bytes = 0;
