@@ -932,6 +932,54 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             });
             continue;
           }
+          // Every piece 1-Lipschitz and convex, with its plane at the centre
+          // (a ball end's raster, a hull's 5-axis finish): piece by piece over
+          // the quarter's voxels, nearest first, each voxel taking a piece
+          // only where the plane or the box leaves it below the voxel's bar
+          // (its value, or the nearest piece so far). The voxel's bar falls
+          // with each piece; a piece passed over cannot be nearer than it,
+          // so each voxel ends with what the loop below would give it (the
+          // least distance where it is below -v, clamped alike beyond -g),
+          // in a loop over a few pieces per quarter instead of a few tests
+          // per piece per voxel.
+          bool planar = true;
+          for (const auto& [key, k] : sub)
+            planar = planar && sweep::lipschitz(*cand[k]) && !std::isnan(seed_d[k]) && !sweep::interior_only(*cand[k]);
+          if (planar) {
+            struct Bar {
+              int idx;
+              float v;
+              double d;  // nearest piece's distance so far
+              Vec3 y, p;
+            };
+            std::array<Bar, 64> bars;
+            int nb = 0;
+            material_voxels(bx, by, bz, [&](int idx, int q, float v, const Vec3& p) {
+              if (sub[0].first - quarter_off[q] >= -static_cast<double>(v)) return;
+              bars[static_cast<std::size_t>(nb++)] = Bar{idx, v, std::numeric_limits<double>::infinity(), quarter_y[q], p};
+            });
+            evaluated += static_cast<std::uint64_t>(nb);
+            for (const auto& [key, k] : sub) {
+              const sweep::Primitive& pk = *cand[k];
+              const double ck = seed_d[k];
+              const Vec3 gk = cgrad[k];
+              const Aabb& bk = cbox[k];
+              for (int b = 0; b < nb; ++b) {
+                Bar& r = bars[static_cast<std::size_t>(b)];
+                const double lim = std::min(r.d, -static_cast<double>(r.v));
+                if (r.d <= -g) continue;  // clamped to air whatever the rest
+                if (ck + gk.dot(r.y) >= lim) continue;
+                const double b2 = sweep::detail::box_distance2(bk, r.p);
+                if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) continue;
+                r.d = std::min(r.d, sweep::distance_inline(pk, r.p));
+              }
+            }
+            for (int b = 0; b < nb; ++b) {
+              const Bar& r = bars[static_cast<std::size_t>(b)];
+              cut_voxel(r.idx, r.v, r.d);
+            }
+            continue;
+          }
           // Where every piece's distance is 1-Lipschitz, each piece's value at
           // the voxel it was last evaluated at bounds it here too, less the
           // distance between the two (far tighter than the quarter centre's),
