@@ -964,15 +964,22 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               const double ck = seed_d[k];
               const Vec3 gk = cgrad[k];
               const Aabb& bk = cbox[k];
-              for (int b = 0; b < nb; ++b) {
-                Bar& r = bars[static_cast<std::size_t>(b)];
-                const double lim = std::min(r.d, -static_cast<double>(r.v));
-                if (r.d <= -g) continue;  // clamped to air whatever the rest
-                if (ck + gk.dot(r.y) >= lim) continue;
-                const double b2 = sweep::detail::box_distance2(bk, r.p);
-                if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) continue;
-                r.d = std::min(r.d, sweep::distance_inline(pk, r.p));
-              }
+              auto take = [&](auto&& dist) {
+                for (int b = 0; b < nb; ++b) {
+                  Bar& r = bars[static_cast<std::size_t>(b)];
+                  const double lim = std::min(r.d, -static_cast<double>(r.v));
+                  if (r.d <= -g) continue;  // clamped to air whatever the rest
+                  if (ck + gk.dot(r.y) >= lim) continue;
+                  const double b2 = sweep::detail::box_distance2(bk, r.p);
+                  if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) continue;
+                  r.d = std::min(r.d, dist(r.p));
+                }
+              };
+              // (A ball end's line, the raster's piece, with its arithmetic inlined.)
+              if (const auto* lp = std::get_if<sweep::LinearPrim>(&pk); lp && lp->env.disk_radius == 0)
+                take([lp](const Vec3& x) { return sweep::detail::ball_line_distance(*lp, x); });
+              else
+                take([&pk](const Vec3& x) { return sweep::distance_inline(pk, x); });
             }
             for (int b = 0; b < nb; ++b) {
               const Bar& r = bars[static_cast<std::size_t>(b)];

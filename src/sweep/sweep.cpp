@@ -73,9 +73,9 @@ double golden_min(F f) {
 }
 
 double linear_distance(const LinearPrim& lp, const Vec3& x) {
-  const detail::Off pl = detail::to_piece(lp, x);
   const auto& e = lp.env;
-  if (e.disk_radius == 0) return std::sqrt(detail::ball_core_offset(lp, pl).norm2()) - e.corner_radius;
+  if (e.disk_radius == 0) return detail::ball_line_distance(lp, x);
+  const detail::Off pl = detail::to_piece(lp, x);
   const Vec3 p(pl.x, pl.y, pl.z);
   const Vec3& d = lp.d_local;
   double core;

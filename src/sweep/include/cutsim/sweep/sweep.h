@@ -374,6 +374,12 @@ struct Off {
           m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz};
 }
 
+/// A ball end's line (LinearPrim with a zero disk radius): the distance to
+/// the parallelogram its core sweeps, less the ball's radius.
+[[gnu::always_inline]] inline double ball_line_distance(const LinearPrim& lp, const Vec3& x) {
+  return std::sqrt(ball_core_offset(lp, to_piece(lp, x)).norm2()) - lp.env.corner_radius;
+}
+
 /// p less its nearest point on the hull (zero inside).
 Vec3 hull_offset(const Vec3& p, const HullPrim& h);
 
