@@ -741,15 +741,15 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       std::vector<double> ckey, seed_d;
       std::vector<Vec3> cgrad;
       std::vector<std::pair<double, std::uint32_t>> order, sub;
-      // A piece near a quarter, in the order tried, with the bound its last
-      // evaluation gives (positions relative to the quarter's centre).
+      // A piece near a quarter, in the order tried (positions relative to
+      // the quarter's centre).
       struct Near {
         double key;  // distance at the quarter's centre (bounded_key)
         const sweep::Primitive* prim;
         const Aabb* box;
-        enum Bound : char { none, plane, cone } bound;
-        double c;  // plane: d(y) >= c + grad . y; cone: d(y) >= c - |y - at|
-        Vec3 grad, at;
+        bool plane;  // convex: d(y) >= c + grad . y
+        double c;
+        Vec3 grad;
         bool inner;  // only its inside matters (sweep::interior_only)
       };
       std::vector<Near> near;
@@ -932,20 +932,22 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             });
             continue;
           }
-          // Every piece 1-Lipschitz and convex, with its plane at the centre
-          // (a ball end's raster, a hull's 5-axis finish): piece by piece over
+          // Every piece 1-Lipschitz (a ball end's raster, a hull's 5-axis
+          // finish, a V tool's planing with its joints): piece by piece over
           // the quarter's voxels, nearest first, each voxel taking a piece
-          // only where the plane or the box leaves it below the voxel's bar
-          // (its value, or the nearest piece so far). The voxel's bar falls
-          // with each piece; a piece passed over cannot be nearer than it,
-          // so each voxel ends with what the loop below would give it (the
-          // least distance where it is below -v, clamped alike beyond -g),
-          // in a loop over a few pieces per quarter instead of a few tests
-          // per piece per voxel.
-          bool planar = true;
-          for (const auto& [key, k] : sub)
-            planar = planar && sweep::lipschitz(*cand[k]) && !std::isnan(seed_d[k]) && !sweep::interior_only(*cand[k]);
-          if (planar) {
+          // only where a bound leaves it below the voxel's bar (its value,
+          // or the nearest piece so far; a joint's, below zero too): a
+          // convex piece's plane at the centre, else its value at the voxel
+          // it was last evaluated at less the step (starting from its key at
+          // the centre), and its box. The bar falls with each piece; a piece
+          // passed over cannot be nearer than it, so each voxel ends with
+          // what the loop below would give it (the least distance where it
+          // is below -v, a joint's only where negative, clamped alike beyond
+          // -g), in a loop over a few pieces per quarter instead of a few
+          // tests per piece per voxel.
+          bool lipschitz_all = true;
+          for (const auto& [key, k] : sub) lipschitz_all = lipschitz_all && sweep::lipschitz(*cand[k]);
+          if (lipschitz_all) {
             struct Bar {
               int idx;
               float v;
@@ -961,25 +963,52 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             evaluated += static_cast<std::uint64_t>(nb);
             for (const auto& [key, k] : sub) {
               const sweep::Primitive& pk = *cand[k];
-              const double ck = seed_d[k];
-              const Vec3 gk = cgrad[k];
               const Aabb& bk = cbox[k];
-              auto take = [&](auto&& dist) {
+              // The voxels one piece may lower: `inner` a joint's (only its
+              // inside counts), `plane` whether its plane at the centre bounds it.
+              auto take = [&](auto&& dist, auto inner, auto plane) {
+                const double ck = seed_d[k];
+                const Vec3 gk = cgrad[k];
+                double cc = key;  // cone: the value at `at` (first, the key at the centre)
+                Vec3 at = Vec3::Zero();
                 for (int b = 0; b < nb; ++b) {
                   Bar& r = bars[static_cast<std::size_t>(b)];
-                  const double lim = std::min(r.d, -static_cast<double>(r.v));
                   if (r.d <= -g) continue;  // clamped to air whatever the rest
-                  if (ck + gk.dot(r.y) >= lim) continue;
+                  const double thr = std::min(r.d, -static_cast<double>(r.v));
+                  const double lim = inner ? std::min(thr, 0.0) : thr;
+                  if constexpr (plane) {
+                    if (ck + gk.dot(r.y) >= lim) continue;
+                  } else {
+                    const double margin = cc - lim;
+                    if (margin >= 0 && margin * margin >= (r.y - at).squaredNorm()) continue;
+                  }
                   const double b2 = sweep::detail::box_distance2(bk, r.p);
                   if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) continue;
-                  r.d = std::min(r.d, dist(r.p));
+                  const double dj = dist(r.p, lim);
+                  if constexpr (!plane) {
+                    cc = dj;  // (a joint's: at most its value, still a bound)
+                    at = r.y;
+                  }
+                  if constexpr (inner) {
+                    if (dj < lim) r.d = dj;  // (else only a bound)
+                  } else {
+                    r.d = std::min(r.d, dj);
+                  }
                 }
               };
-              // (A ball end's line, the raster's piece, with its arithmetic inlined.)
-              if (const auto* lp = std::get_if<sweep::LinearPrim>(&pk); lp && lp->env.disk_radius == 0)
-                take([lp](const Vec3& x) { return sweep::detail::ball_line_distance(*lp, x); });
-              else
-                take([&pk](const Vec3& x) { return sweep::distance_inline(pk, x); });
+              using yes = std::true_type;
+              using no = std::false_type;
+              const bool seeded = !std::isnan(seed_d[k]);
+              if (sweep::interior_only(pk)) {
+                take([&pk](const Vec3& x, double lim) { return sweep::distance_below(pk, x, lim); }, yes{}, no{});
+              } else if (const auto* lp = std::get_if<sweep::LinearPrim>(&pk); lp && lp->env.disk_radius == 0 && seeded) {
+                // (A ball end's line, the raster's piece, with its arithmetic inlined.)
+                take([lp](const Vec3& x, double) { return sweep::detail::ball_line_distance(*lp, x); }, no{}, yes{});
+              } else if (seeded) {
+                take([&pk](const Vec3& x, double) { return sweep::distance_inline(pk, x); }, no{}, yes{});
+              } else {
+                take([&pk](const Vec3& x, double) { return sweep::distance_inline(pk, x); }, no{}, no{});
+              }
             }
             for (int b = 0; b < nb; ++b) {
               const Bar& r = bars[static_cast<std::size_t>(b)];
@@ -987,22 +1016,19 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             }
             continue;
           }
-          // Where every piece's distance is 1-Lipschitz, each piece's value at
-          // the voxel it was last evaluated at bounds it here too, less the
-          // distance between the two (far tighter than the quarter centre's),
-          // and the piece nearest at the last voxel is tried first, so the bar
-          // the others must clear is low from the start. (Not with profile
-          // prisms: their first-order distance would make the voxels depend
-          // on the order the pieces are tried in.)
-          constexpr std::size_t none = std::numeric_limits<std::size_t>::max();
-          bool reuse = true;
+          // Some piece not 1-Lipschitz (a general line, a profile prism
+          // sheared sideways or with a round nose): voxel by voxel, each
+          // trying the pieces nearest first and only those its plane at the
+          // centre (a convex piece's), its key and its box leave below the
+          // bar (no bound from a value at another voxel: a first-order
+          // distance would make the voxels depend on the order the pieces
+          // are tried in).
           near.clear();
           for (const auto& [key, k] : sub) {
-            reuse = reuse && sweep::lipschitz(*cand[k]);
             Near& n = near.emplace_back(
-                Near{key, cand[k], &cbox[k], Near::none, 0, Vec3::Zero(), Vec3::Zero(), sweep::interior_only(*cand[k])});
+                Near{key, cand[k], &cbox[k], false, 0, Vec3::Zero(), sweep::interior_only(*cand[k])});
             if (!std::isnan(seed_d[k])) {  // a convex piece's plane at the centre
-              n.bound = Near::plane;
+              n.plane = true;
               n.c = seed_d[k];
               n.grad = cgrad[k];
             }
@@ -1016,7 +1042,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             Run r{std::numeric_limits<double>::infinity(), 0, Vec3::Zero()};
             bool convex = true;
             for (std::size_t j = j0; j < j1; ++j) {
-              convex = convex && near[j].bound == Near::plane;
+              convex = convex && near[j].plane;
               r.c = std::min(r.c, near[j].c);
               r.grad += near[j].grad;
             }
@@ -1028,7 +1054,6 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             for (std::size_t j = j0; j < j1; ++j) r.spread = std::max(r.spread, (near[j].grad - r.grad).norm());
             runs.push_back(r);
           }
-          std::size_t nearest = none;
           material_voxels(bx, by, bz, [&](int idx, int q, float v, const Vec3& p) {
             const Vec3& y = quarter_y[q];  // p - cb
             const double off = quarter_off[q];
@@ -1037,43 +1062,13 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             // Only d < -v changes the voxel; a piece farther than that (or
             // than the nearest piece so far) cannot matter.
             double d = std::numeric_limits<double>::infinity();
-            std::size_t best = none;
-            // (`lim`: a joint's value at or above it is only a bound, and
-            // not a candidate.)
-            auto eval = [&](std::size_t j, double lim) {
-              Near& n = near[j];
-              double dj;
-              if (n.inner) {
-                dj = sweep::distance_below(*n.prim, p, lim);
-                if (reuse) {
-                  n.bound = Near::cone;
-                  n.c = dj;
-                  n.at = y;
-                }
-                if (dj >= lim) return;
-              } else if (!reuse) {
-                dj = sweep::distance_inline(*n.prim, p);
-              } else if (sweep::convex_distance(*n.prim, p, &dj, &n.grad)) {
-                n.bound = Near::plane;
-                n.c = dj - n.grad.dot(y);
-              } else {
-                dj = sweep::distance_inline(*n.prim, p);
-                n.bound = Near::cone;
-                n.c = dj;
-                n.at = y;
-              }
-              if (dj < d) {
-                d = dj;
-                best = j;
-              }
-            };
-            if (nearest != none) eval(nearest, near[nearest].inner ? std::min(need, 0.0) : need);
             for (std::size_t j = 0; j < near.size() && d > -g; ++j) {  // at -g: clamped to air whatever the rest
               const double thr = std::min(d, need);
               const Near& n = near[j];
               if (n.key - off >= thr) break;  // and every piece after it
               // (A joint's outside is no nearer than its prisms: it matters
-              // only where it is negative.)
+              // only where it is negative; its value at or above `lim` is
+              // only a bound, and not a candidate.)
               const double lim = n.inner ? std::min(thr, 0.0) : thr;
               if (n.inner && n.key - off >= lim) continue;
               if (j % kRun == 0) {
@@ -1083,23 +1078,13 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
                   continue;
                 }
               }
-              if (j == nearest) continue;
-              // Convex pieces: the tangent plane at the last voxel; other
-              // 1-Lipschitz pieces: the last value less the step, on
-              // squared lengths (c - thr >= |y - at|): a fly-cutter's tori
-              // all cut within a voxel of each other, so every voxel
-              // passes dozens of them, and the root was a quarter of the
-              // update there.
-              if (n.bound == Near::plane && n.c + n.grad.dot(y) >= lim) continue;
-              if (n.bound == Near::cone) {
-                const double margin = n.c - lim;
-                if (margin >= 0 && margin * margin >= (y - n.at).squaredNorm()) continue;
-              }
+              if (n.plane && n.c + n.grad.dot(y) >= lim) continue;
               const double b2 = sweep::detail::box_distance2(*n.box, p);
               if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) continue;
-              eval(j, lim);
+              const double dj = n.inner ? sweep::distance_below(*n.prim, p, lim) : sweep::distance_inline(*n.prim, p);
+              if (n.inner && dj >= lim) continue;
+              d = std::min(d, dj);
             }
-            if (reuse && best != none) nearest = best;
             ++evaluated;
             cut_voxel(idx, v, d);
           });
