@@ -740,6 +740,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
       std::vector<Aabb> cbox;
       std::vector<double> ckey, seed_d;
       std::vector<Vec3> cgrad;
+      std::vector<char> clip;  // sweep::lipschitz, asked once per leaf (it is out of line)
       std::vector<std::pair<double, std::uint32_t>> order, sub;
       // A piece near a quarter, in the order tried (positions relative to
       // the quarter's centre).
@@ -803,11 +804,13 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         cbox.clear();
         ckey.clear();
         cgrad.clear();
+        clip.clear();
         for (const auto& [key, k] : order) {
           cand.push_back(prims[keys.piece(pairs[k])]);
           cbox.push_back(sweep::bounds(*cand.back()));
           ckey.push_back(key);
           cgrad.push_back(pair_g[k]);
+          clip.push_back(sweep::lipschitz(*cand.back()));
         }
         seed_d.resize(cand.size());
         const bool partial = !m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
@@ -869,7 +872,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               dk = sweep::distance_inline(*cand[k], cb);
               seed_d[k] = std::numeric_limits<double>::quiet_NaN();
             }
-            const double key = bounded_key(dk, *cand[k]);
+            const double key = dk > 0 || clip[k] ? dk : -std::numeric_limits<double>::infinity();  // bounded_key
             if (key - hd_sub >= (inner ? std::min(need_max, 0.0) : need_max)) continue;
             sub.emplace_back(key, static_cast<std::uint32_t>(k));
           }
@@ -890,7 +893,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           // would write, without a distance per voxel). The old surface's
           // band under a cut is mostly such quarters.
           if (const sweep::Primitive& p0 = *cand[sub[0].second];
-              sweep::lipschitz(p0) && sweep::distance_inline(p0, cb) + hd_sub <= -g - 1e-6 * h) {
+              clip[sub[0].second] && sweep::distance_inline(p0, cb) + hd_sub <= -g - 1e-6 * h) {
             material_voxels(bx, by, bz, [&](int idx, int, float, const Vec3&) {
               data[idx] = m.gamma;
               mask.setOff(static_cast<openvdb::Index>(idx));
@@ -909,7 +912,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             const std::size_t k0 = sub[0].second;
             const sweep::Primitive& p0 = *cand[k0];
             const double key0 = sub[0].first, c0 = seed_d[k0];
-            const bool seeded = !std::isnan(c0), reuse0 = sweep::lipschitz(p0);
+            const bool seeded = !std::isnan(c0), reuse0 = clip[k0] != 0;
             const Vec3 g0 = cgrad[k0];
             const Aabb& box0 = cbox[k0];
             const bool inner = sweep::interior_only(p0);
@@ -946,7 +949,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           // -g), in a loop over a few pieces per quarter instead of a few
           // tests per piece per voxel.
           bool lipschitz_all = true;
-          for (const auto& [key, k] : sub) lipschitz_all = lipschitz_all && sweep::lipschitz(*cand[k]);
+          for (const auto& [key, k] : sub) lipschitz_all = lipschitz_all && clip[k];
           if (lipschitz_all) {
             struct Bar {
               int idx;
