@@ -189,6 +189,46 @@ TEST(Volume, EveryLeafHoldsTheBand) {
   EXPECT_EQ(s.stats().idle_leaves, 0u) << "after the cut";
 }
 
+// The block as built holds its exact signed distance, clamped to the band,
+// at every voxel of the ROI: faces, edges and corners, the leaves the build
+// fills along one axis only and the ones it fills voxel by voxel, and the
+// partial leaves where the ROI ends inside the material.
+TEST(Volume, TheBuiltBlockIsItsClampedDistanceAtEveryVoxel) {
+  const double h = 0.01;
+  const Aabb box{Vec3(-0.413, -0.387, -0.604), Vec3(0.391, 0.417, 0.003)};
+  const Aabb roi{Vec3(-0.6, -0.2, -0.5), Vec3(0.6, 0.6, 0.5)};  // past three faces, inside on the others
+  stock::StockOptions so;
+  so.voxel_mm = h;
+  stock::Stock s(box, roi, so);
+  const double g = s.band_mm();
+  std::size_t voxels = 0, band = 0, deep = 0, worst_at = 0;
+  double worst = 0;
+  std::mutex mu;
+  s.for_each_roi_block([&](const stock::VoxelBlock& vb) {
+    std::size_t n = 0, nb = 0, nd = 0;
+    double w = 0;
+    for (int x = 0; x < vb.n[0]; ++x)
+      for (int y = 0; y < vb.n[1]; ++y)
+        for (int z = 0; z < vb.n[2]; ++z) {
+          const double v = vb.uniform ? vb.value : vb.values[(x * 8 + y) * 8 + z];
+          const Vec3 p = vb.first_center + h * Vec3(x, y, z);
+          const double want = std::clamp(box_signed_distance(box, p), -g, g);
+          w = std::max(w, std::abs(v - want));
+          ++n;
+          nb += std::abs(want) < g;
+          nd += want == -g;
+        }
+    std::lock_guard<std::mutex> lock(mu);
+    voxels += n;
+    band += nb;
+    deep += nd;
+    if (w > worst) worst = w, worst_at = voxels;
+  });
+  EXPECT_GT(band, 20000u);  // all six faces' bands are in the ROI somewhere
+  EXPECT_GT(deep, 100000u);  // and the material below them, where the ROI ends inside it
+  EXPECT_LT(worst, 1e-7 * h) << "at voxel " << worst_at;
+}
+
 // Every voxel of the ROI, by block.
 std::map<std::tuple<double, double, double>, std::vector<float>> voxels_of(const stock::Stock& s) {
   std::mutex mu;

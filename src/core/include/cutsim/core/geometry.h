@@ -53,14 +53,19 @@ struct Aabb {
   double volume() const { Vec3 s = size(); return s.x() * s.y() * s.z(); }
 };
 
+/// A point's signed distance to a box from its per-axis offsets q (|p - centre|
+/// less the half size, each axis on its own: a lattice computes them per row).
+inline double box_signed_distance_q(const Vec3& q) {
+  const double outside = q.cwiseMax(0.0).norm();
+  const double inside = std::min(q.maxCoeff(), 0.0);
+  return outside + inside;
+}
+
 /// Signed distance to an axis-aligned box (negative inside), exact.
 inline double box_signed_distance(const Aabb& b, const Vec3& p) {
   const Vec3 c = b.center();
   const Vec3 h = 0.5 * (b.max - b.min);
-  const Vec3 q = (p - c).cwiseAbs() - h;
-  const double outside = q.cwiseMax(0.0).norm();
-  const double inside = std::min(q.maxCoeff(), 0.0);
-  return outside + inside;
+  return box_signed_distance_q((p - c).cwiseAbs() - h);
 }
 
 }  // namespace cutsim
