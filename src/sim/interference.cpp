@@ -35,8 +35,13 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
 
   // Poses: evenly spaced along the tip's path (sampled for multi-axis moves).
   const Pose p0 = planner_.pose_at(m, pm, 0.0);
+  const bool straight = !m.is_arc() && (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
   double len = 0;
-  {
+  if (straight) {
+    // Rotary joints held: the tip runs a straight line at a fixed
+    // orientation (Planner::whole_sweep), so its chord is its length.
+    len = (planner_.pose_at(m, pm, 1.0).translation() - p0.translation()).norm();
+  } else {
     // Tip travel plus how far the tool's far end swings with the axis.
     Vec3 prev = p0.translation(), prev_axis = p0.linear().col(2);
     const double far = tool::shape_bounds(tool::cutting_shape(tool)).max.norm();
@@ -49,7 +54,6 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     }
   }
   const int n = std::clamp(static_cast<int>(std::ceil(len / pose_spacing(tool, stock_.voxel_mm()))), 1, 100000);
-  const bool straight = !m.is_arc() && (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
   const Aabb reach = stock_.roi().intersected(stock_.box().expanded(stock_.voxel_mm()));
 
   // Envelopes (neck, shank, holder, a rapid's cutter) are tested swept
