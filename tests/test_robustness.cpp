@@ -64,6 +64,23 @@ TEST(Interrupt, PartialWritesAMarkedResult) {
   EXPECT_GT(j["removed_volume_mm3"].get<double>(), 0);
 }
 
+// One stop delivered twice (a supervisor such as `timeout` signals both
+// the process and its group): the second, 50 ms after the first has been
+// handled, is the same stop, not a second Ctrl-C that kills at once.
+TEST(Interrupt, ASignalRepeatedWithinHalfASecondIsTheSameStop) {
+  TempDir dir;
+  const auto prog = dir.write("long.nc", long_program());
+  std::string err;
+  const int code = run_cli_raw("sh -c '" + std::string(CUTSIM_BIN) + " run " + prog +
+                                   " --partial --tool ball:d=0.5 --stock-box -0.5,-0.5,-0.5,1.1,1.1,0 --voxel 0.001 -o " +
+                                   dir.file("out") +
+                                   " & p=$!; sleep 2.5; kill -INT $p; sleep 0.05; kill -INT $p; wait $p'",
+                               nullptr, &err);
+  EXPECT_EQ(code, 130) << err;
+  EXPECT_NE(err.find("partial result written"), std::string::npos) << err;
+  EXPECT_TRUE(fs::exists(dir.file("out/long.partial.report.json"))) << err;
+}
+
 TEST(Degenerate, EmptyProgramWithAStockCutsNothing) {
   TempDir dir;
   auto r = run_program(dir, "", "ball:d=1", Aabb{Vec3(0, 0, -1), Vec3(1, 1, 0)}, 0.01);

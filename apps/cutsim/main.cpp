@@ -1,5 +1,7 @@
 // cutsim: a cutting simulator for ultra-precision machining.
+#include <atomic>
 #include <csignal>
+#include <ctime>
 #include <cstdio>
 #include <iostream>
 
@@ -9,13 +11,30 @@
 #include "cutsim/core/error.h"
 
 namespace {
-// Records the signal; a second one kills as usual (SA_RESETHAND).
-void on_signal(int sig) { cutsim::interrupt_signal().store(sig); }
+// Records the first signal; one that comes later kills as usual. Within
+// half a second of the first, a signal counts as the same one: `timeout`
+// (and other supervisors) signal both the child and its process group, so
+// one stop arrives twice, and on a busy machine the first may be handled
+// before the second is sent. (Only async-signal-safe calls here.)
+std::atomic<long long> g_first_signal_ns{0};
+void on_signal(int sig) {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  const long long now = static_cast<long long>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+  if (cutsim::interrupt_signal().load() == 0) {
+    g_first_signal_ns.store(now);
+    cutsim::interrupt_signal().store(sig);
+    return;
+  }
+  if (now - g_first_signal_ns.load() < 500'000'000) return;
+  std::signal(sig, SIG_DFL);
+  std::raise(sig);
+}
 void install_handlers() {
   struct sigaction sa {};
   sa.sa_handler = on_signal;
   sigemptyset(&sa.sa_mask);
-  sa.sa_flags = SA_RESETHAND;
+  sa.sa_flags = 0;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
 }
