@@ -94,6 +94,7 @@ float quarter_min(const float* data, int qx, int qy, int qz) {
 // Without it the leaves of a 32^3 cube come in x, y, z order (the order
 // the contact check breaks ties in).
 constexpr int kMid = 1 << Stock::Impl::kBlockLog2;  // the occupancy map's blocks
+static_assert(kNode1Dim == 1 << Stock::Impl::kNodeLog2, "the node map's nodes are the tree's 128^3 nodes");
 constexpr int kSub = 2 * kLeafDim;
 
 template <bool kSubLevel = false, class Keep, class Leaf>
@@ -205,6 +206,28 @@ void Stock::Impl::rebuild_occupancy() {
   const auto& tree = grid->tree();
   for (auto l = tree.cbeginLeaf(); l; ++l) mark(CoordBBox::createCube(l->origin(), kLeafDim));
   for_each_tile(tree, [](float v) { return v <= 0; }, mark);  // (air tiles hold none)
+  node_lo = Coord(lo.x() >> kNodeLog2, lo.y() >> kNodeLog2, lo.z() >> kNodeLog2);
+  node_nx = (hi.x() >> kNodeLog2) - node_lo.x() + 1;
+  node_ny = (hi.y() >> kNodeLog2) - node_lo.y() + 1;
+  node_nz = (hi.z() >> kNodeLog2) - node_lo.z() + 1;
+  node_occ.assign((static_cast<std::size_t>(node_nx) * node_ny * node_nz + 63) / 64, 0);
+  for (int x = 0; x < node_nx; ++x)
+    for (int y = 0; y < node_ny; ++y)
+      for (int z = 0; z < node_nz; ++z)
+        update_node_bit(Coord((node_lo.x() + x) << kNodeLog2, (node_lo.y() + y) << kNodeLog2, (node_lo.z() + z) << kNodeLog2));
+}
+
+void Stock::Impl::update_node_bit(const Coord& o) {
+  const std::int64_t i = node_bit(o);
+  if (i < 0) return;
+  constexpr int kDim = 1 << kBlockLog2, kNode = 1 << kNodeLog2;
+  bool any = false;
+  for (int x = 0; x < kNode && !any; x += kDim)
+    for (int y = 0; y < kNode && !any; y += kDim)
+      for (int z = 0; z < kNode && !any; z += kDim) any = may_hold_material(o.offsetBy(x, y, z));
+  const std::uint64_t bit = std::uint64_t(1) << (i & 63);
+  if (any) node_occ[static_cast<std::size_t>(i) >> 6] |= bit;
+  else node_occ[static_cast<std::size_t>(i) >> 6] &= ~bit;
 }
 
 void Stock::Impl::refresh_occupancy(std::vector<Coord> blocks) {
@@ -222,7 +245,11 @@ void Stock::Impl::refresh_occupancy(std::vector<Coord> blocks) {
           const Coord o = b.offsetBy(lx, ly, lz);
           material = acc.probeConstLeaf(o) || acc.getValue(o) <= 0;
         }
-    if (!material) occ[static_cast<std::size_t>(i) >> 6] &= ~(std::uint64_t(1) << (i & 63));
+    if (!material) {
+      occ[static_cast<std::size_t>(i) >> 6] &= ~(std::uint64_t(1) << (i & 63));
+      constexpr int kMask = ~((1 << kNodeLog2) - 1);
+      update_node_bit(Coord(b.x() & kMask, b.y() & kMask, b.z() & kMask));
+    }
   }
 }
 
@@ -1183,14 +1210,6 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   // reaches some 450k leaves). Where a batch is split follows the counts
   // only, so runs repeat exactly; the union removed does not depend on it.
   std::vector<std::vector<std::uint64_t>> per_prim(prims.size());
-  // Whether a 128^3 block may hold material in any of its 32^3 blocks.
-  auto any_material = [&m](const Coord& o) {
-    for (int x = 0; x < kNode1Dim; x += kMid)
-      for (int y = 0; y < kNode1Dim; y += kMid)
-        for (int z = 0; z < kNode1Dim; z += kMid)
-          if (m.may_hold_material(o.offsetBy(x, y, z))) return true;
-    return false;
-  };
   auto bin = [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (interrupted()) return;  // abandoned: the caller throws
@@ -1230,7 +1249,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             m.origin, h, bb,
             [&](const Vec3& c, double hd, const Coord& bo, int dim) {
               if (dim == kMid && !m.may_hold_material(bo)) return false;
-              if (dim == kNode1Dim && !any_material(bo)) return false;
+              if (dim == kNode1Dim && !m.node_may_hold_material(bo)) return false;
               const double d = sweep::distance(p, c);
               if (d > reach + hd) return false;
               if (dim == kSub) return true;  // (blocks set to air whole are the occupancy map's: 32^3 or 128^3)
@@ -1302,7 +1321,8 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   bool node_air = false;
   for_each_leaf_block(m.origin, m.h, bb,
                       [&](const Vec3& c, double hd, const Coord& bo, int dim) {
-                        return (dim != kMid || m.may_hold_material(bo)) && region(c) <= hd - min_depth_mm;
+                        return (dim != kMid || m.may_hold_material(bo)) &&
+                               (dim != kNode1Dim || m.node_may_hold_material(bo)) && region(c) <= hd - min_depth_mm;
                       },
                       [&](const Coord& o) {
                         const Coord n1(o.x() & ~(kNode1Dim - 1), o.y() & ~(kNode1Dim - 1), o.z() & ~(kNode1Dim - 1));
