@@ -1060,19 +1060,34 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
           bool lipschitz_all = true;
           for (const auto& [key, k] : sub) lipschitz_all = lipschitz_all && clip[k];
           if (lipschitz_all) {
-            struct Bar {
-              int idx;
-              float v;
-              double d;  // nearest piece's distance so far
-              Vec3 y, p;
+            // The quarter's voxels that may change ("bars"), by field: the
+            // planes' test runs over them in a loop of its own, before any
+            // distance (a voxel's bar depends only on its own pieces, so
+            // the order does not matter).
+            struct Bars {
+              std::array<int, 64> idx;
+              std::array<float, 64> v;
+              std::array<double, 64> d;     // nearest piece's distance so far
+              std::array<double, 64> need;  // -v
+              std::array<double, 64> yx, yy, yz;  // offset from the quarter's centre
+              std::array<Vec3, 64> p;
             };
-            std::array<Bar, 64> bars;
+            Bars bars;
             int nb = 0;
             material_voxels(bx, by, bz, [&](int idx, int q, float v, const Vec3& p) {
               if (sub[0].first - quarter_off[q] >= -static_cast<double>(v)) return;
-              bars[static_cast<std::size_t>(nb++)] = Bar{idx, v, std::numeric_limits<double>::infinity(), quarter_y[q], p};
+              const auto b = static_cast<std::size_t>(nb++);
+              bars.idx[b] = idx;
+              bars.v[b] = v;
+              bars.d[b] = std::numeric_limits<double>::infinity();
+              bars.need[b] = -static_cast<double>(v);
+              bars.yx[b] = quarter_y[q].x();
+              bars.yy[b] = quarter_y[q].y();
+              bars.yz[b] = quarter_y[q].z();
+              bars.p[b] = p;
             });
             evaluated += static_cast<std::uint64_t>(nb);
+            std::array<int, 64> pass;  // the bars a piece's plane leaves below
             for (const auto& [key, k] : sub) {
               const sweep::Primitive& pk = *cand[k];
               const Aabb& bk = cbox[k];
@@ -1080,37 +1095,54 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               // inside counts), `plane` whether its plane at the centre bounds
               // it, `boxed` whether its box is tested too.
               auto take = [&](auto&& dist, auto inner, auto plane, auto boxed) {
-                const double ck = seed_d[k];
-                const Vec3 gk = cgrad[k];
-                double cc = key;  // cone: the value at `at` (first, the key at the centre)
-                Vec3 at = Vec3::Zero();
-                for (int b = 0; b < nb; ++b) {
-                  Bar& r = bars[static_cast<std::size_t>(b)];
-                  if (r.d <= -g) continue;  // clamped to air whatever the rest
-                  const double thr = std::min(r.d, -static_cast<double>(r.v));
-                  const double lim = inner ? std::min(thr, 0.0) : thr;
-                  if constexpr (plane) {
-                    if (ck + gk.dot(r.y) >= lim) continue;
+                // A voxel whose bar is above the piece's bound there: its box,
+                // then its distance.
+                auto at_voxel = [&](std::size_t b, double lim) {
+                  if constexpr (boxed) {
+                    const double b2 = sweep::detail::box_distance2(bk, bars.p[b]);
+                    if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) return std::numeric_limits<double>::infinity();
+                  }
+                  const double dj = dist(bars.p[b], lim);
+                  if constexpr (inner) {
+                    if (dj < lim) bars.d[b] = dj;  // (else only a bound)
                   } else {
+                    bars.d[b] = std::min(bars.d[b], dj);
+                  }
+                  return dj;
+                };
+                if constexpr (plane) {
+                  static_assert(!inner, "a joint has no plane");
+                  const double ck = seed_d[k], gx = cgrad[k].x(), gy = cgrad[k].y(), gz = cgrad[k].z();
+                  int np = 0;
+                  for (int b = 0; b < nb; ++b) {
+                    const double lim = std::min(bars.d[b], bars.need[b]);
+                    // (ck + g . y, summed as Eigen's dot does; -g: clamped to air whatever the rest)
+                    const bool below = bars.d[b] > -g && ck + (gx * bars.yx[b] + gy * bars.yy[b] + gz * bars.yz[b]) < lim;
+                    pass[static_cast<std::size_t>(np)] = b;
+                    np += below;
+                  }
+                  for (int j = 0; j < np; ++j) {
+                    const auto b = static_cast<std::size_t>(pass[static_cast<std::size_t>(j)]);
+                    at_voxel(b, std::min(bars.d[b], bars.need[b]));
+                  }
+                } else {
+                  double cc = key;  // cone: the value at `at` (first, the key at the centre)
+                  Vec3 at = Vec3::Zero();
+                  for (int bi = 0; bi < nb; ++bi) {
+                    const auto b = static_cast<std::size_t>(bi);
+                    if (bars.d[b] <= -g) continue;  // clamped to air whatever the rest
+                    const double thr = std::min(bars.d[b], bars.need[b]);
+                    const double lim = inner ? std::min(thr, 0.0) : thr;
                     // (On squared lengths: a fly-cutter's tori all cut within
                     // a voxel of each other, and a root per test was a
                     // quarter of the update there.)
+                    const Vec3 y(bars.yx[b], bars.yy[b], bars.yz[b]);
                     const double margin = cc - lim;
-                    if (margin >= 0 && margin * margin >= (r.y - at).squaredNorm()) continue;
-                  }
-                  if constexpr (boxed) {
-                    const double b2 = sweep::detail::box_distance2(bk, r.p);
-                    if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) continue;
-                  }
-                  const double dj = dist(r.p, lim);
-                  if constexpr (!plane) {
+                    if (margin >= 0 && margin * margin >= (y - at).squaredNorm()) continue;
+                    const double dj = at_voxel(b, lim);
+                    if (dj == std::numeric_limits<double>::infinity()) continue;  // its box passed it over
                     cc = dj;  // (a joint's: at most its value, still a bound)
-                    at = r.y;
-                  }
-                  if constexpr (inner) {
-                    if (dj < lim) r.d = dj;  // (else only a bound)
-                  } else {
-                    r.d = std::min(r.d, dj);
+                    at = y;
                   }
                 }
               };
@@ -1131,8 +1163,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               }
             }
             for (int b = 0; b < nb; ++b) {
-              const Bar& r = bars[static_cast<std::size_t>(b)];
-              cut_voxel(r.idx, r.v, r.d);
+              const auto i = static_cast<std::size_t>(b);
+              cut_voxel(bars.idx[i], bars.v[i], bars.d[i]);
             }
             continue;
           }
