@@ -187,47 +187,34 @@ std::size_t estimate_memory_bytes(const Aabb& box, const Aabb& roi, const StockO
 }
 
 void Stock::Impl::rebuild_occupancy() {
-  const Coord lo = grid_index.min(), hi = grid_index.max();
-  occ_lo = Coord(lo.x() >> kBlockLog2, lo.y() >> kBlockLog2, lo.z() >> kBlockLog2);
-  occ_nx = (hi.x() >> kBlockLog2) - occ_lo.x() + 1;
-  occ_ny = (hi.y() >> kBlockLog2) - occ_lo.y() + 1;
-  occ_nz = (hi.z() >> kBlockLog2) - occ_lo.z() + 1;
-  occ.assign((static_cast<std::size_t>(occ_nx) * occ_ny * occ_nz + 63) / 64, 0);
+  occ.reset(kBlockLog2, grid_index);
   auto mark = [&](CoordBBox b) {
     b.intersect(grid_index);
     if (b.empty()) return;
     for (int x = b.min().x() >> kBlockLog2; x <= b.max().x() >> kBlockLog2; ++x)
       for (int y = b.min().y() >> kBlockLog2; y <= b.max().y() >> kBlockLog2; ++y)
-        for (int z = b.min().z() >> kBlockLog2; z <= b.max().z() >> kBlockLog2; ++z) {
-          const std::int64_t i = occ_bit(Coord(x << kBlockLog2, y << kBlockLog2, z << kBlockLog2));
-          occ[static_cast<std::size_t>(i) >> 6] |= std::uint64_t(1) << (i & 63);
-        }
+        for (int z = b.min().z() >> kBlockLog2; z <= b.max().z() >> kBlockLog2; ++z)
+          occ.set(occ.index(Coord(x << kBlockLog2, y << kBlockLog2, z << kBlockLog2)), true);
   };
   const auto& tree = grid->tree();
   for (auto l = tree.cbeginLeaf(); l; ++l) mark(CoordBBox::createCube(l->origin(), kLeafDim));
   for_each_tile(tree, [](float v) { return v <= 0; }, mark);  // (air tiles hold none)
-  node_lo = Coord(lo.x() >> kNodeLog2, lo.y() >> kNodeLog2, lo.z() >> kNodeLog2);
-  node_nx = (hi.x() >> kNodeLog2) - node_lo.x() + 1;
-  node_ny = (hi.y() >> kNodeLog2) - node_lo.y() + 1;
-  node_nz = (hi.z() >> kNodeLog2) - node_lo.z() + 1;
-  node_occ.assign((static_cast<std::size_t>(node_nx) * node_ny * node_nz + 63) / 64, 0);
-  for (int x = 0; x < node_nx; ++x)
-    for (int y = 0; y < node_ny; ++y)
-      for (int z = 0; z < node_nz; ++z)
-        update_node_bit(Coord((node_lo.x() + x) << kNodeLog2, (node_lo.y() + y) << kNodeLog2, (node_lo.z() + z) << kNodeLog2));
+  nodes.reset(kNodeLog2, grid_index);
+  for (int x = 0; x < nodes.nx; ++x)
+    for (int y = 0; y < nodes.ny; ++y)
+      for (int z = 0; z < nodes.nz; ++z)
+        update_node_bit(Coord((nodes.lo.x() + x) << kNodeLog2, (nodes.lo.y() + y) << kNodeLog2, (nodes.lo.z() + z) << kNodeLog2));
 }
 
 void Stock::Impl::update_node_bit(const Coord& o) {
-  const std::int64_t i = node_bit(o);
+  const std::int64_t i = nodes.index(o);
   if (i < 0) return;
   constexpr int kDim = 1 << kBlockLog2, kNode = 1 << kNodeLog2;
   bool any = false;
   for (int x = 0; x < kNode && !any; x += kDim)
     for (int y = 0; y < kNode && !any; y += kDim)
       for (int z = 0; z < kNode && !any; z += kDim) any = may_hold_material(o.offsetBy(x, y, z));
-  const std::uint64_t bit = std::uint64_t(1) << (i & 63);
-  if (any) node_occ[static_cast<std::size_t>(i) >> 6] |= bit;
-  else node_occ[static_cast<std::size_t>(i) >> 6] &= ~bit;
+  nodes.set(i, any);
 }
 
 void Stock::Impl::refresh_occupancy(std::vector<Coord> blocks) {
@@ -236,8 +223,8 @@ void Stock::Impl::refresh_occupancy(std::vector<Coord> blocks) {
   openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(grid->tree());
   constexpr int kDim = 1 << kBlockLog2;
   for (const Coord& b : blocks) {
-    const std::int64_t i = occ_bit(b);
-    if (i < 0 || !occ_test(i)) continue;
+    const std::int64_t i = occ.index(b);
+    if (i < 0 || !occ.test(i)) continue;
     bool material = false;
     for (int lx = 0; lx < kDim && !material; lx += kLeafDim)
       for (int ly = 0; ly < kDim && !material; ly += kLeafDim)
@@ -246,7 +233,7 @@ void Stock::Impl::refresh_occupancy(std::vector<Coord> blocks) {
           material = acc.probeConstLeaf(o) || acc.getValue(o) <= 0;
         }
     if (!material) {
-      occ[static_cast<std::size_t>(i) >> 6] &= ~(std::uint64_t(1) << (i & 63));
+      occ.set(i, false);
       constexpr int kMask = ~((1 << kNodeLog2) - 1);
       update_node_bit(Coord(b.x() & kMask, b.y() & kMask, b.z() & kMask));
     }
@@ -1628,10 +1615,9 @@ StockStats Stock::stats() const {
   s.memory_bytes = impl_->grid->tree().memUsage();
   for (auto l = impl_->grid->tree().cbeginLeaf(); l; ++l) s.idle_leaves += l->isValueMaskOff() ? 1 : 0;
   const Impl& m = *impl_;
-  const std::size_t n = static_cast<std::size_t>(m.occ_nx) * m.occ_ny * m.occ_nz;
   std::size_t held = 0;
-  for (std::uint64_t w : m.occ) held += static_cast<std::size_t>(std::popcount(w));
-  s.air_blocks = n - held;
+  for (std::uint64_t w : m.occ.words) held += static_cast<std::size_t>(std::popcount(w));
+  s.air_blocks = m.occ.size() - held;
   return s;
 }
 

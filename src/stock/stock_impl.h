@@ -42,47 +42,58 @@ struct Stock::Impl {
   // leaf; the report asks for it several times). Cleared by every cut.
   std::optional<double> grid_volume_now;
 
+  // One bit per cube of 2^log2 voxels over a box of voxel indices, x-major.
+  struct CubeBits {
+    int log2 = 0;
+    openvdb::Coord lo;  // first cube, in cube units
+    int nx = 0, ny = 0, nz = 0;
+    std::vector<std::uint64_t> words;
+    /// Covers the cubes that meet `box` (voxel indices), all bits clear.
+    void reset(int cube_log2, const openvdb::CoordBBox& box) {
+      log2 = cube_log2;
+      lo = openvdb::Coord(box.min().x() >> log2, box.min().y() >> log2, box.min().z() >> log2);
+      nx = (box.max().x() >> log2) - lo.x() + 1;
+      ny = (box.max().y() >> log2) - lo.y() + 1;
+      nz = (box.max().z() >> log2) - lo.z() + 1;
+      words.assign((size() + 63) / 64, 0);
+    }
+    std::size_t size() const { return static_cast<std::size_t>(nx) * ny * nz; }
+    /// The bit of the cube holding voxel `o`, or -1 outside.
+    std::int64_t index(const openvdb::Coord& o) const {
+      const int x = (o.x() >> log2) - lo.x(), y = (o.y() >> log2) - lo.y(), z = (o.z() >> log2) - lo.z();
+      if (x < 0 || y < 0 || z < 0 || x >= nx || y >= ny || z >= nz) return -1;
+      return (static_cast<std::int64_t>(x) * ny + y) * nz + z;
+    }
+    bool test(std::int64_t i) const { return (words[static_cast<std::size_t>(i) >> 6] >> (i & 63)) & 1; }
+    void set(std::int64_t i, bool on) {
+      const std::uint64_t bit = std::uint64_t(1) << (i & 63);
+      std::uint64_t& w = words[static_cast<std::size_t>(i) >> 6];
+      w = on ? (w | bit) : (w & ~bit);
+    }
+    /// True outside the map, or where the bit is set.
+    bool maybe(const openvdb::Coord& o) const {
+      const std::int64_t i = index(o);
+      return i < 0 || test(i);
+    }
+  };
+
   // Which 32^3 blocks of grid_index may hold material (a leaf, or a tile
   // at or below 0). A clear bit means all air: cuts and contact checks
   // pass over the block without probing its 64 leaves. Bits are only
   // cleared where the tree shows air, so the map errs towards material.
   static constexpr int kBlockLog2 = 5;
-  openvdb::Coord occ_lo;  // first block, in block units
-  int occ_nx = 0, occ_ny = 0, occ_nz = 0;
-  std::vector<std::uint64_t> occ;
-  /// The bit of the block holding voxel `o`, or -1 outside the map.
-  std::int64_t occ_bit(const openvdb::Coord& o) const {
-    const int x = (o.x() >> kBlockLog2) - occ_lo.x(), y = (o.y() >> kBlockLog2) - occ_lo.y(),
-              z = (o.z() >> kBlockLog2) - occ_lo.z();
-    if (x < 0 || y < 0 || z < 0 || x >= occ_nx || y >= occ_ny || z >= occ_nz) return -1;
-    return (static_cast<std::int64_t>(x) * occ_ny + y) * occ_nz + z;
-  }
-  bool occ_test(std::int64_t i) const { return (occ[static_cast<std::size_t>(i) >> 6] >> (i & 63)) & 1; }
+  CubeBits occ;
   /// `o`: a voxel index (of a 32-aligned block). True outside the map.
-  bool may_hold_material(const openvdb::Coord& o) const {
-    const std::int64_t i = occ_bit(o);
-    return i < 0 || occ_test(i);
-  }
+  bool may_hold_material(const openvdb::Coord& o) const { return occ.maybe(o); }
   // The same per 128^3 node (4^3 blocks): a set bit where any of its
   // blocks' is, so a piece's box over air (above a roughed part) is passed
   // over a node at a time: the blade at 1 um asked 45 M all-air nodes, 64
   // bits each. Nodes outside the map (whose blocks are) count as material.
   static constexpr int kNodeLog2 = 7;
-  openvdb::Coord node_lo;  // first node, in node units
-  int node_nx = 0, node_ny = 0, node_nz = 0;
-  std::vector<std::uint64_t> node_occ;
-  std::int64_t node_bit(const openvdb::Coord& o) const {
-    const int x = (o.x() >> kNodeLog2) - node_lo.x(), y = (o.y() >> kNodeLog2) - node_lo.y(),
-              z = (o.z() >> kNodeLog2) - node_lo.z();
-    if (x < 0 || y < 0 || z < 0 || x >= node_nx || y >= node_ny || z >= node_nz) return -1;
-    return (static_cast<std::int64_t>(x) * node_ny + y) * node_nz + z;
-  }
+  CubeBits nodes;
   /// `o`: a voxel index (of a 128-aligned node). True outside the map, and
   /// where may_hold_material is for one of the node's 32^3 blocks.
-  bool node_may_hold_material(const openvdb::Coord& o) const {
-    const std::int64_t i = node_bit(o);
-    return i < 0 || ((node_occ[static_cast<std::size_t>(i) >> 6] >> (i & 63)) & 1);
-  }
+  bool node_may_hold_material(const openvdb::Coord& o) const { return nodes.maybe(o); }
   /// Sets node `o`'s bit from its blocks' (`o`: 128-aligned).
   void update_node_bit(const openvdb::Coord& o);
   /// From the whole tree (after a build or a load).
