@@ -35,7 +35,7 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
 
   // Poses: evenly spaced along the tip's path (sampled for multi-axis moves).
   const Pose p0 = planner_.pose_at(m, pm, 0.0);
-  const bool straight = !m.is_arc() && (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
+  const bool straight = m.is_straight();
   double len = 0;
   if (straight) {
     // Rotary joints held: the tip runs a straight line at a fixed

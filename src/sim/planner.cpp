@@ -115,8 +115,7 @@ sweep::Sweep Planner::part_sweep(const motion::Move& m, const PlannedMove& p, co
       poses.push_back(pose_at(m, p, (k * rev_s - p.t0) / (p.t1 - p.t0)));
     return sweep::sweep_tori(poses, std::get<tool::SwingTorus>(shape));
   }
-  const bool rotary_fixed = (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
-  if (!m.is_arc() && rotary_fixed) {
+  if (m.is_straight()) {
     const Pose a = pose_at(m, p, s0), b = pose_at(m, p, s1);
     return sweep::sweep_line(a.translation(), b.translation(), a.linear(), shape);
   }
@@ -148,8 +147,7 @@ sweep::Sweep Planner::whole_sweep(const motion::Move& m, const PlannedMove& p, c
   }
   if (exact_ && std::holds_alternative<tool::RevolvedEnvelope>(shape))
     return sweep::sweep_move(m, tool, sweep::SweepOptions{opt_.chord_tolerance_mm});
-  const bool rotary_fixed = (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() == 0;
-  if (!m.is_arc() && rotary_fixed) {
+  if (m.is_straight()) {
     // Rotary joints held: the tool pose is an affine image of the straight
     // joint motion, so the tip runs a straight line at a fixed orientation.
     const Pose a = pose_at(m, p, 0.0), b = pose_at(m, p, 1.0);
@@ -179,7 +177,7 @@ sweep::Sweep Planner::whole_sweep(const motion::Move& m, const PlannedMove& p, c
 
 void Planner::monitor(const motion::Move& m, const PlannedMove& p, machine::AxisMonitor& mon) const {
   const bool feed = m.kind != motion::MotionKind::rapid;
-  const bool rotary = (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() > 0;
+  const bool rotary = m.turns_rotary();
   int steps = 1;
   if (m.is_arc()) steps = std::max(1, static_cast<int>(std::ceil(std::fabs(m.arc_sweep_angle()) / (kPi / 32))));
   else if (m.tcp && rotary) steps = 8;

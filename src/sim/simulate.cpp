@@ -339,7 +339,7 @@ SimResult simulate(const SimOptions& opt) {
         }
       // The regions that must not touch: where they reach into the stock,
       // the grid must hold the material they might meet.
-      const int n = (m.end.abc - m.start.abc).cwiseAbs().maxCoeff() > 0 || m.is_arc() ? 16 : 1;
+      const int n = m.is_straight() ? 1 : 16;
       for (const auto& r : tool::contact_regions(t)) {
         const Aabb lb = tool::shape_bounds(r.shape);
         for (int i = 0; i <= n; ++i) {

@@ -1282,12 +1282,12 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         const bool deep = d < -(g + hd0) && m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
         out.push_back(keys.key(o, deep ? kDeep : id));
       };
-      if (nl <= kListLeaves && !sweep::lipschitz(p)) {
+      const bool lip = sweep::lipschitz(p);
+      if (nl <= kListLeaves && !lip) {
         for (int x = bb.min().x() & ~7; x <= bb.max().x(); x += kLeafDim)
           for (int y = bb.min().y() & ~7; y <= bb.max().y(); y += kLeafDim)
             for (int z = bb.min().z() & ~7; z <= bb.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
       } else {
-        const bool lip = sweep::lipschitz(p);
         for_each_leaf_block<true>(
             m.origin, h, bb,
             [&](const Vec3& c, double hd, const Coord& bo, int dim) {

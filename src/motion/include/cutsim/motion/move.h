@@ -36,6 +36,11 @@ struct Move {
   Vec3 tool_axis = Vec3::UnitZ();  ///< requested tool axis in the workpiece frame (G53.1)
 
   bool is_arc() const { return kind == MotionKind::arc_cw || kind == MotionKind::arc_ccw; }
+  /// Some rotary axis moves.
+  bool turns_rotary() const { return (end.abc - start.abc).cwiseAbs().maxCoeff() > 0; }
+  /// Not an arc and no rotary axis moving: the tool pose is then an affine
+  /// image of straight joint motion, a straight tip path at one orientation.
+  bool is_straight() const { return !is_arc() && !turns_rotary(); }
   bool is_cutting_feed() const { return kind != MotionKind::rapid; }
 
   /// Signed sweep angle of an arc in radians about `normal` (negative for
