@@ -1279,7 +1279,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         const double d = sweep::distance(p, c0);
         if (d > reach + hd0) return;
         // (the test step 2 makes on the smallest distance)
-        const bool deep = d < -(g + hd0) && m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
+        const bool deep = marks && d < -(g + hd0) && m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
         out.push_back(keys.key(o, deep ? kDeep : id));
       };
       const bool lip = sweep::lipschitz(p);
