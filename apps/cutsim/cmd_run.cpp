@@ -45,6 +45,7 @@ struct RunArgs {
   std::vector<std::string> joint_errors;
   std::string tool_setting, workpiece_setting, environment;
   bool partial = false;
+  std::size_t measure_band = 0;
   std::string target;
   double tolerance = -1;
   double glb_scale = 1.0;
@@ -99,6 +100,10 @@ Action add_run_command(CLI::App& app) {
   cmd->add_option("--workpiece-setting", args->workpiece_setting, "setting error of the workpiece (same keys)");
   cmd->add_option("--environment", args->environment,
                   "environment log CSV (time_s, temperature_c, humidity_pct, pressure_hpa) for laser-scale axes");
+  cmd->add_option("--measure-band", args->measure_band,
+                  "also count the voxels the moves' bands reach (the report's band_voxels, for 'cutsim bench'), "
+                  "evaluating 1 leaf in N one voxel at a time; slow at N = 1")
+      ->check(kPositive);
   cmd->add_flag("--partial", args->partial,
                 "on Ctrl-C or SIGTERM while cutting, write what was cut so far as <stem>.partial.glb and "
                 "<stem>.partial.report.json (default: write nothing)");
@@ -141,6 +146,7 @@ Action add_run_command(CLI::App& app) {
     if (!args->workpiece_setting.empty()) opt.workpiece_setting = args->workpiece_setting;
     if (!args->environment.empty()) opt.environment = args->environment;
     opt.keep_partial = args->partial;
+    opt.measure_band_every = args->measure_band;
     // The target is read and checked before any simulation.
     std::optional<TriMesh> target_mesh;
     const std::string target_file = !args->target.empty() ? args->target : opt.job.target.value_or("");

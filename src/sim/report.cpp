@@ -93,6 +93,7 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   j["contacts"] = cs;
   j["active_voxels"] = st.active_voxels;
   j["voxel_evaluations"] = st.voxel_evaluations;
+  if (st.band_voxels) j["band_voxels"] = st.band_voxels;
   j["voxels_aired_by_quarter"] = st.voxels_aired;
   j["blocks_aired_whole"] = st.blocks_aired;
   j["stock_update_batches"] = st.grid_updates;

@@ -314,6 +314,7 @@ SimResult simulate(const SimOptions& opt) {
   // Region of interest: what the sweeps reach inside the stock; axis limits.
   stock::StockOptions sopt;
   sopt.voxel_mm = res.voxel_mm;
+  sopt.measure_band_every = opt.measure_band_every;
   if (opt.job.memory_limit_mb) sopt.memory_limit_bytes = static_cast<std::size_t>(*opt.job.memory_limit_mb * 1048576.0);
   const double margin = (sopt.half_band_voxels + 2) * res.voxel_mm;
   const Aabb stock_reach = res.stock_box.expanded(margin);

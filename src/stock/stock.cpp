@@ -286,6 +286,7 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
   m.h = opt.voxel_mm;
   m.gamma = static_cast<float>(opt.half_band_voxels * m.h);
   m.max_pairs = std::max<std::size_t>(1, opt.max_update_pairs);
+  m.measure_band_every = opt.measure_band_every;
   const Aabb roi = roi_in.intersected(box.expanded(m.gamma + m.h));
   if (roi.empty()) throw GeometryError({}, "the region the tools reach does not meet the stock");
 
@@ -458,14 +459,18 @@ void Stock::subtract(const sweep::Sweep& sw) {
   std::vector<const sweep::Primitive*> prims;
   prims.reserve(sw.prims.size());
   for (const auto& p : sw.prims) prims.push_back(&p);
-  subtract_prims(prims);
+  subtract_prims(prims, std::vector<std::uint32_t>(prims.size(), 0));
 }
 
 void Stock::subtract(const std::vector<sweep::Sweep>& batch) {
   std::vector<const sweep::Primitive*> prims;
-  for (const auto& sw : batch)
-    for (const auto& p : sw.prims) prims.push_back(&p);
-  subtract_prims(prims);
+  std::vector<std::uint32_t> owner;
+  for (std::size_t i = 0; i < batch.size(); ++i)
+    for (const auto& p : batch[i].prims) {
+      prims.push_back(&p);
+      owner.push_back(static_cast<std::uint32_t>(i));
+    }
+  subtract_prims(prims, owner);
 }
 
 void Stock::release_scratch() {
@@ -565,6 +570,54 @@ double bounded_key(double d, const sweep::Primitive& p) {
   return d > 0 || sweep::lipschitz(p) ? d : -std::numeric_limits<double>::infinity();
 }
 
+// Picks the leaves StockOptions::measure_band_every samples: a hash of
+// the origin, so the same leaves in every run.
+std::uint64_t leaf_hash(const Coord& o) {
+  std::uint64_t x = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(o.x())) << 42) ^
+                    (static_cast<std::uint64_t>(static_cast<std::uint32_t>(o.y())) << 21) ^
+                    static_cast<std::uint32_t>(o.z());
+  x ^= x >> 33;
+  x *= 0xff51afd7ed558ccdULL;
+  x ^= x >> 33;
+  x *= 0xc4ceb9fe1a85ec53ULL;
+  return x ^ (x >> 33);
+}
+
+// The voxels of `box` (indices) nearer than `g` to one of `pieces`. A
+// piece's distance is exact outside it and of the right sign inside, so
+// at a voxel y from the box's centre it is at most max(d, 0) + |y| (d + |y|
+// where it is 1-Lipschitz) and, for d >= 0, at least d - |y|: boxes the
+// bounds settle count whole, the others are halved down to voxels.
+std::uint64_t near_voxels(const Stock::Impl& m, const CoordBBox& box, const std::vector<const sweep::Primitive*>& pieces,
+                          double g) {
+  const Coord n = box.dim();
+  const Vec3 lo = m.index_to_world(box.min());
+  const Vec3 c = lo + 0.5 * m.h * Vec3(n.x() - 1, n.y() - 1, n.z() - 1);
+  const double r = 0.5 * m.h * Vec3(n.x() - 1, n.y() - 1, n.z() - 1).norm();
+  double up = std::numeric_limits<double>::infinity();
+  bool far = true;
+  for (const sweep::Primitive* p : pieces) {
+    const double d = sweep::distance(*p, c);
+    up = std::min(up, (d >= 0 || r == 0 || sweep::lipschitz(*p) ? d : 0.0) + r);
+    far = far && d >= 0 && d - r >= g;
+    if (up < g) return box.volume();
+  }
+  if (far || r == 0) return 0;
+  std::uint64_t count = 0;
+  const Coord half(std::max(1, n.x() / 2), std::max(1, n.y() / 2), std::max(1, n.z() / 2));
+  for (int i = 0; i < 2; ++i)
+    for (int j = 0; j < 2; ++j)
+      for (int k = 0; k < 2; ++k) {
+        const Coord a(box.min().x() + i * half.x(), box.min().y() + j * half.y(), box.min().z() + k * half.z());
+        const Coord b(i ? box.max().x() : std::min(box.max().x(), a.x() + half.x() - 1),
+                      j ? box.max().y() : std::min(box.max().y(), a.y() + half.y() - 1),
+                      k ? box.max().z() : std::min(box.max().z(), a.z() + half.z() - 1));
+        if (a.x() > b.x() || a.y() > b.y() || a.z() > b.z()) continue;
+        count += near_voxels(m, CoordBBox(a, b), pieces, g);
+      }
+  return count;
+}
+
 // Leaves above this count in a piece's box are culled block by block on
 // the piece's distance instead of listed whole.
 constexpr std::int64_t kListLeaves = 4096;
@@ -609,7 +662,7 @@ void drop_beyond_nearest(std::vector<std::pair<double, std::uint32_t>>& sub, con
 
 }  // namespace
 
-void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
+void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, const std::vector<std::uint32_t>& owner) {
   Impl& m = *impl_;
   if (prims.empty()) return;
   m.grid_volume_now.reset();
@@ -627,7 +680,9 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
   // split changes which uniform leaves end as tiles, and so which of
   // equally deep voxels a contact reports.)
   const LeafKeys keys_marked(m.roi_index, prims.size() + 1);
-  const bool marks = keys_marked.total <= 64;
+  // (Not when measuring the bands' reach: that counts a deep leaf once per
+  // move, so it needs the pieces.)
+  const bool marks = keys_marked.total <= 64 && !m.measure_band_every;
   const LeafKeys keys = marks ? keys_marked : LeafKeys(m.roi_index, prims.size());
   const auto kDeep = marks ? static_cast<std::uint32_t>(prims.size()) : std::numeric_limits<std::uint32_t>::max();
   if (keys.total > 64) {
@@ -635,8 +690,9 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     // union removed does not depend on the split).
     if (prims.size() == 1) throw GeometryError({}, "the region of interest has too many leaves to index");
     const auto mid = prims.begin() + static_cast<std::ptrdiff_t>(prims.size() / 2);
-    subtract_prims(std::vector<const sweep::Primitive*>(prims.begin(), mid));
-    subtract_prims(std::vector<const sweep::Primitive*>(mid, prims.end()));
+    const auto omid = owner.begin() + (mid - prims.begin());
+    subtract_prims(std::vector<const sweep::Primitive*>(prims.begin(), mid), std::vector<std::uint32_t>(owner.begin(), omid));
+    subtract_prims(std::vector<const sweep::Primitive*>(mid, prims.end()), std::vector<std::uint32_t>(omid, owner.end()));
     return;
   }
   auto t_lap = std::chrono::steady_clock::now();
@@ -685,6 +741,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
                 if (!m.may_hold_material(bo)) continue;
                 aired.push_back(bo);
                 ++m.blocks_aired;
+                if (m.measure_band_every) m.band_voxels += kMid * kMid * kMid;
               }
           tacc.addTile(2, b.origin, m.gamma, false);
           continue;
@@ -697,6 +754,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
               if (!tacc.probeLeaf(o) && tacc.getValue(o) > 0) continue;  // air already
               tacc.addTile(1, o, m.gamma, false);
               changed = true;
+              if (m.measure_band_every) m.band_voxels += kLeafDim * kLeafDim * kLeafDim;
             }
         if (!changed) continue;
         aired.push_back(b.origin);
@@ -735,8 +793,33 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
     // (at 1 um, made there, their allocation and first touch held the one
     // thread for much of the step).
     std::vector<std::unique_ptr<LeafT>> fresh(ng);
+    // StockOptions::measure_band_every: the voxels of leaf o that each move
+    // (a run of pieces) among pairs [k0, k1) holds nearer than the band;
+    // pair_d is written for them.
+    const std::size_t measure = m.measure_band_every;
+    auto band_reach = [&](const Coord& o, std::size_t k0, std::size_t k1, bool whole) -> std::uint64_t {
+      const bool sampled = measure == 1 || leaf_hash(o) % measure == 0;
+      const CoordBBox vox = CoordBBox::createCube(o, kLeafDim);
+      const CoordBBox in(Coord::maxComponent(vox.min(), m.roi_index.min()), Coord::minComponent(vox.max(), m.roi_index.max()));
+      std::uint64_t n = 0;
+      std::vector<const sweep::Primitive*> run;
+      for (std::size_t a = k0; a < k1;) {
+        const std::uint32_t mv = owner[keys.piece(pairs[a])];
+        double dm = std::numeric_limits<double>::infinity();  // proven: every voxel within dm + hd0
+        run.clear();
+        for (; a < k1 && owner[keys.piece(pairs[a])] == mv; ++a) {
+          const sweep::Primitive* piece = prims[keys.piece(pairs[a])];
+          dm = std::min(dm, pair_d[a] >= 0 || sweep::lipschitz(*piece) ? pair_d[a] : 0.0);
+          if (!(pair_d[a] >= 0 && pair_d[a] - hd0 >= g)) run.push_back(piece);  // (else no voxel here is near)
+        }
+        if (whole && dm + hd0 < g) n += 512;
+        else if (sampled && !run.empty()) n += near_voxels(m, in, run, g) * measure;
+      }
+      return n;
+    };
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ng), [&](const auto& r) {
       if (interrupted()) return;
+      std::uint64_t band = 0;  // (measure_band_every)
       for (std::size_t gi = r.begin(); gi != r.end(); ++gi) {
         if (interrupted()) return;
         const Coord o = keys.origin(pairs[group[gi]]);
@@ -758,8 +841,9 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
             pair_g[k] = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
           }
           d = std::min(d, pair_d[k]);
-          if (d < -(g + hd0) && whole) break;  // air, whatever the rest
+          if (d < -(g + hd0) && whole && !measure) break;  // air, whatever the rest
         }
+        if (measure) band += band_reach(o, group[gi], group[gi + 1], whole);
         if (d > g + hd0) continue;
         if (d < -(g + hd0) && whole) {
           action[gi] = to_air;
@@ -772,6 +856,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims) {
         action[gi] = update;
         if (!leaf) fresh[gi] = std::make_unique<LeafT>(o, tree.getValue(o), false);  // tiles are inactive
       }
+      if (band) m.band_voxels.fetch_add(band, std::memory_order_relaxed);
     });
     lap(m.classify_s);
     if (interrupted()) return;
@@ -1604,6 +1689,7 @@ StockStats Stock::stats() const {
   StockStats s;
   s.voxel_evaluations = impl_->voxel_evaluations.load();
   s.voxels_aired = impl_->voxels_aired.load();
+  s.band_voxels = impl_->band_voxels.load();
   s.blocks_aired = impl_->blocks_aired;
   s.grid_updates = impl_->grid_updates;
   s.bin_s = impl_->bin_s;

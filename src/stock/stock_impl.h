@@ -23,6 +23,8 @@ struct Stock::Impl {
   double initial_grid_volume = 0;  // coverage volume inside roi_index at build
   std::atomic<std::uint64_t> voxel_evaluations{0};  // voxels the cuts evaluated (bench figure)
   std::atomic<std::uint64_t> voxels_aired{0};       // voxels set to air by a whole quarter's bound
+  std::atomic<std::uint64_t> band_voxels{0};        // StockStats::band_voxels
+  std::size_t measure_band_every = 0;                // StockOptions::measure_band_every
   std::size_t blocks_aired = 0;                      // 32^3 blocks with material set to air whole (bench figure)
   std::size_t max_pairs = std::size_t(1) << 20;  // StockOptions::max_update_pairs
   // Scratch of the stock update, kept between calls: fresh arrays of this

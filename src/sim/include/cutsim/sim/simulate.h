@@ -46,6 +46,8 @@ struct SimOptions {
   /// On interruption while cutting, return what was cut so far (marked
   /// `interrupted`) instead of throwing InterruptedError.
   bool keep_partial = false;
+  /// --measure-band N: stock::StockOptions::measure_band_every (a bench figure).
+  std::size_t measure_band_every = 0;
   /// Bounds of the target, when there is one: a target that misses the
   /// stock is refused before any grid is built.
   std::optional<Aabb> target_bounds;

@@ -34,6 +34,14 @@ struct StockOptions {
   /// evaluated (blade at 1 um: 2.08 G evaluations at 2^20, 1.50 G at
   /// 2^22, for some 0.1-0.5 GB more at the peak).
   std::size_t max_update_pairs = std::size_t(1) << 22;
+  /// Measure StockStats::band_voxels (a bench figure; 0: off). A leaf a
+  /// move's band reaches counts 512 where its distance at the leaf's
+  /// centre proves every voxel within the band, else its voxels are
+  /// evaluated one by one, in 1 leaf in N (picked by a hash of the leaf's
+  /// place) and counted N times. At N = 1 it takes several times the
+  /// update's own time (the snowflake's 8 s update: 30 s); the voxels come
+  /// out the same.
+  std::size_t measure_band_every = 0;
 };
 
 /// Up to 8 x 8 x 8 voxels of the region of interest (a leaf-sized block,
@@ -59,6 +67,14 @@ struct Overlap {
 
 struct StockStats {
   std::size_t voxel_evaluations = 0;  ///< tool distances the cuts evaluated so far
+  /// Voxels the moves' bands reach (StockOptions::measure_band_every; 0
+  /// when not measured): summed over the moves, the voxels of the grid's
+  /// leaves and material tiles nearer a move than the band's half width,
+  /// the voxels a plain update (tool distance, max, write back) would
+  /// visit. The 32^3 and 128^3 blocks a piece holds deeper than the band
+  /// (set to air whole, their leaves never listed) count once, not once
+  /// per move that reaches them: there the figure is a lower bound.
+  std::size_t band_voxels = 0;
   /// Voxels set to air with no distance of their own: their 4^3 quarter
   /// lies deeper than the band inside one piece.
   std::size_t voxels_aired = 0;
@@ -174,7 +190,8 @@ public:
 
 private:
   Stock();
-  void subtract_prims(const std::vector<const sweep::Primitive*>& prims);
+  // owner[i]: the move (sweep) piece i belongs to, non-decreasing.
+  void subtract_prims(const std::vector<const sweep::Primitive*>& prims, const std::vector<std::uint32_t>& owner);
   std::unique_ptr<Impl> impl_;
 };
 
