@@ -153,7 +153,7 @@ Action add_bench_command(CLI::App& app) {
     nlohmann::ordered_json rows = nlohmann::ordered_json::array();
     std::printf("kernel: %.3g voxel updates/s on %d thread%s (ball-end distance, max, write back, in cache)\n", kernel,
                 threads, threads == 1 ? "" : "s");
-    std::printf("%-16s %8s %8s %8s %12s %8s %7s %9s %10s %10s %6s %6s %11s %11s %11s %8s %6s\n", "case", "blocks",
+    std::printf("%-20s %8s %8s %8s %12s %8s %7s %9s %10s %10s %6s %6s %11s %11s %11s %8s %6s\n", "case", "blocks",
                 "moves", "voxel_um", "active_vox", "wall_s", "rss_MB", "moves/s", "eval/s", "vox_upd/s", "/kern", "eval%",
                 "removed_mm3", "over_mm3", "under_mm3", "contacts", "axis");
     int worst = 0;
@@ -241,7 +241,7 @@ Action add_bench_command(CLI::App& app) {
       row["threads"] = threads;
       row["repeats_agree"] = same;
       rows.push_back(row);
-      std::printf("%-16s %8d %8d %8.3g %12lld %8.3f %7.0f %9.0f %10.3g %10.3g %6.2f %6.1f %11.6g %11.4g %11.4g %8zu %6zu\n",
+      std::printf("%-20s %8d %8d %8.3g %12lld %8.3f %7.0f %9.0f %10.3g %10.3g %6.2f %6.1f %11.6g %11.4g %11.4g %8zu %6zu\n",
                   c.c_str(), rep["blocks"].get<int>(), rep["moves"].get<int>(), rep["voxel_size_mm"].get<double>() * 1000,
                   rep["active_voxels"].get<long long>(), wall, rss,
                   row["moves_per_s"].get<double>(), eps, vps, row["update_to_kernel"].get<double>(),
