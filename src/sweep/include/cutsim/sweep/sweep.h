@@ -570,6 +570,37 @@ double distance_below(const Primitive& p, const Vec3& x, double lim);
   return true;
 }
 
+/// A lower bound for a profile prism that is not 1-Lipschitz (a round
+/// nose, a sideways move), from its value and gradient at `x`: its
+/// distance at every point y is at least min(*c + *g . (y - x), 0). The
+/// bound is the edge's 2-D signed distance at the point's place in the
+/// section with the move's shear not clamped to the prism's length: the
+/// profile is convex (a wedge no wider than a half plane, rounded), so its
+/// signed distance is convex, and so is that composed with the (affine)
+/// shear; its tangent plane lies below it. The prism's distance is never
+/// below min(that, 0): within its length the section distance is this one
+/// scaled by a lean factor of at most 1 (or the top's, or larger), the
+/// length's own term only raising it inside; beyond its length, or outside
+/// it, the distance is positive. False for other pieces.
+[[gnu::always_inline]] inline bool prism_section_plane(const Primitive& p, const Vec3& x, double* c, Vec3* g) {
+  const auto* pp = std::get_if<ProfilePrim>(&p);
+  if (!pp || !pp->prism || !(pp->edge.half_angle <= kPi / 2)) return false;
+  const double rx = x.x() - pp->origin.x(), ry = x.y() - pp->origin.y(), rz = x.z() - pp->origin.z();
+  const Eigen::Matrix3d& m = pp->to_local;
+  const double px = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, py = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
+               pz = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
+  const Vec3& d = pp->d_local;
+  const double s = px * pp->inv_dx;  // (not clamped)
+  double gy = 0, gz = 0;
+  *c = tool::profile_distance_2d(pp->edge, pp->sin_half, pp->cos_half, py - s * d.y(), pz - s * d.z(), &gy, &gz);
+  // The section's place (py - s d.y, pz - s d.z) moves with px by -d.y/d.x
+  // and -d.z/d.x: the gradient in the piece's frame, then the world's.
+  const double gx = -(gy * d.y() + gz * d.z()) * pp->inv_dx;
+  *g = Vec3(m(0, 0) * gx + m(1, 0) * gy + m(2, 0) * gz, m(0, 1) * gx + m(1, 1) * gy + m(2, 1) * gz,
+            m(0, 2) * gx + m(1, 2) * gy + m(2, 2) * gz);
+  return true;
+}
+
 inline double core_radius(const Primitive& p) {
   if (const auto* hp = std::get_if<HullPrim>(&p)) return hp->radius;
   if (const auto* tp = std::get_if<TorusPrim>(&p)) return tp->torus.nose_radius;
