@@ -496,13 +496,13 @@ TEST(Sweep, VToolPlaningPrismIsOneLipschitz) {
 }
 
 // The stock update passes over a round nose's or a sideways prism's
-// distance at a voxel where the plane of its section's distance (shear not
-// clamped) at the quarter's centre, capped at 0, clears the deepest so
-// far: the prism must never lie below that capped plane. Nose and V tools,
-// moves sheared sideways and up or down, a tilted tool frame; pairs near
-// the prism, inside and out, and past its ends. The cap matters: without
-// it the plane passes above the prism somewhere.
-TEST(Sweep, ProfilePrismLiesAboveItsSectionsPlaneCappedAtZero) {
+// distance at a voxel where its section bound, worked out at the quarter's
+// centre, clears the bar: the prism must never lie below it. Nose and V
+// tools, moves sheared sideways and up or down, a tilted tool frame; pairs
+// near the prism, inside and out, and past its ends. Each part of the
+// bound is needed: the plane alone passes above the prism outside, and the
+// plane within the length alone past its ends.
+TEST(Sweep, ProfilePrismLiesAboveItsSectionBound) {
   std::mt19937_64 rng(23);
   const Eigen::Matrix3d R = Eigen::AngleAxisd(0.5, Vec3(0.2, 1, 0.4).normalized()).toRotationMatrix();
   struct Case {
@@ -517,7 +517,7 @@ TEST(Sweep, ProfilePrismLiesAboveItsSectionsPlaneCappedAtZero) {
       {"vtool:angle=90,h=0.05", Vec3(0.02, 0.005, -0.003), Eigen::Matrix3d::Identity()},
       {"vtool:angle=60,h=0.05", Vec3(0.03, -0.01, 0.01), R},
   };
-  int checked = 0, inside = 0, uncapped_above = 0;
+  int checked = 0, inside = 0, plane_above = 0, length_above = 0;
   for (const Case& cs : cases) {
     const sweep::Sweep s = sweep::sweep_line(Vec3(0.01, -0.02, 0.03), Vec3(0.01, -0.02, 0.03) + cs.move, cs.frame,
                                              tool::parse_tool_spec(cs.spec, "test"));
@@ -529,26 +529,27 @@ TEST(Sweep, ProfilePrismLiesAboveItsSectionsPlaneCappedAtZero) {
     for (int i = 0; i < 40000; ++i) {
       const Vec3 x(ux(rng), uy(rng), uz(rng));
       const Vec3 y = i % 2 ? Vec3(ux(rng), uy(rng), uz(rng)) : Vec3(x + Vec3(step(rng), step(rng), step(rng)));
-      double c = 0;
-      Vec3 g;
-      ASSERT_TRUE(sweep::prism_section_plane(p, x, &c, &g)) << cs.spec;
+      sweep::SectionPlane sp;
+      ASSERT_TRUE(sweep::prism_section_plane(p, x, &sp)) << cs.spec;
       const double dy = sweep::distance(p, y);
-      EXPECT_GE(dy, std::min(c + g.dot(y - x), 0.0) - 1e-12) << cs.spec << " from " << x.transpose() << " to "
+      EXPECT_GE(dy, sweep::section_bound(sp, y - x) - 1e-12) << cs.spec << " from " << x.transpose() << " to "
                                                             << y.transpose();
       inside += dy < 0;
-      uncapped_above += dy < c + g.dot(y - x) - 1e-9;
+      const double plane = sp.c + sp.g.dot(y - x);
+      plane_above += dy < plane - 1e-9;
+      length_above += dy < (plane >= 0 ? sp.f_min * plane : plane) - 1e-9;
       ++checked;
     }
   }
   EXPECT_EQ(checked, 200000);
   EXPECT_GT(inside, 20000);
-  EXPECT_GT(uncapped_above, 100);
+  EXPECT_GT(plane_above, 100);
+  EXPECT_GT(length_above, 100);
   // Other pieces say no.
   const sweep::Sweep ball = sweep::sweep_line(Vec3(0, 0, 0), Vec3(1, 0, 0), Eigen::Matrix3d::Identity(),
                                               tool::parse_tool_spec("ball:d=1", "test"));
-  double c = 0;
-  Vec3 g;
-  EXPECT_FALSE(sweep::prism_section_plane(ball.prims.at(0), Vec3(0, 0, 0), &c, &g));
+  sweep::SectionPlane sp;
+  EXPECT_FALSE(sweep::prism_section_plane(ball.prims.at(0), Vec3(0, 0, 0), &sp));
 }
 
 TEST(Sweep, VToolPrismIsItsPlanesInsideAndTheExtrusionOfItsSectionOutside) {

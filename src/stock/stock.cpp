@@ -933,7 +933,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
         double c;
         Vec3 grad;
         bool inner;  // only its inside matters (sweep::interior_only)
-        bool capped = false;  // the plane bounds only below 0: d(y) >= min(c + grad . y, 0)
+        bool section = false;  // a prism's bound instead (sweep::section_bound; c its A at the centre)
+        sweep::SectionPlane sec;
       };
       std::vector<Near> near;
       // Runs of kRun pieces in that order, bounded together from their
@@ -1256,26 +1257,29 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
               n.plane = true;
               n.c = seed_d[k];
               n.grad = cgrad[k];
-            } else if (sweep::prism_section_plane(*cand[k], cb, &n.c, &n.grad)) {
-              // A round nose's or a sideways prism's: below 0 only (a voxel
+            } else if (sweep::prism_section_plane(*cand[k], cb, &n.sec)) {
+              // A round nose's or a sideways prism's section plane (a voxel
               // inside several, as a slow tool servo's turns overlap, then
-              // takes only those its plane leaves below the deepest so far),
-              // lowered by far more than the arithmetic's rounding.
-              n.plane = n.capped = true;
-              n.c -= 1e-12;
+              // takes only those it leaves below the deepest so far), lowered
+              // by far more than the arithmetic's rounding.
+              n.section = true;
+              n.sec.c -= 1e-12;
+              n.sec.lo -= 1e-12;
+              n.sec.hi += 1e-12;
+              n.c = n.sec.c;
             }
           }
           // The pieces with no bound from their key (inside, not 1-Lipschitz)
           // come first, in any order (each voxel takes the least of the
-          // pieces no bound passes over): the deepest planes first, so that
-          // the rest are passed over.
+          // pieces no bound passes over): the deepest sections first, so
+          // that the rest are passed over.
           {
             const auto unkeyed = std::partition_point(near.begin(), near.end(), [](const Near& n) {
               return n.key == -std::numeric_limits<double>::infinity();
             });
             std::stable_sort(near.begin(), unkeyed, [](const Near& a, const Near& b) {
-              return (a.capped ? a.c : std::numeric_limits<double>::infinity()) <
-                     (b.capped ? b.c : std::numeric_limits<double>::infinity());
+              return (a.section ? a.c : std::numeric_limits<double>::infinity()) <
+                     (b.section ? b.c : std::numeric_limits<double>::infinity());
             });
           }
           // A run whose pieces are all convex gets one bound for all of them
@@ -1287,7 +1291,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
             Run r{std::numeric_limits<double>::infinity(), 0, Vec3::Zero()};
             bool convex = true;
             for (std::size_t j = j0; j < j1; ++j) {
-              convex = convex && near[j].plane && !near[j].capped;
+              convex = convex && near[j].plane;
               r.c = std::min(r.c, near[j].c);
               r.grad += near[j].grad;
             }
@@ -1323,7 +1327,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
                   continue;
                 }
               }
-              if (n.plane && n.c + n.grad.dot(y) >= lim && (!n.capped || lim <= 0)) continue;
+              if (n.plane && n.c + n.grad.dot(y) >= lim) continue;
+              if (n.section && sweep::section_bound(n.sec, y) >= lim) continue;
               const double b2 = sweep::detail::box_distance2(*n.box, p);
               if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) continue;
               const double dj = n.inner ? sweep::distance_below(*n.prim, p, lim) : sweep::distance_inline(*n.prim, p);

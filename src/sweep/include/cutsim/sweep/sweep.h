@@ -571,18 +571,30 @@ double distance_below(const Primitive& p, const Vec3& x, double lim);
 }
 
 /// A lower bound for a profile prism that is not 1-Lipschitz (a round
-/// nose, a sideways move), from its value and gradient at `x`: its
-/// distance at every point y is at least min(*c + *g . (y - x), 0). The
-/// bound is the edge's 2-D signed distance at the point's place in the
-/// section with the move's shear not clamped to the prism's length: the
-/// profile is convex (a wedge no wider than a half plane, rounded), so its
-/// signed distance is convex, and so is that composed with the (affine)
-/// shear; its tangent plane lies below it. The prism's distance is never
-/// below min(that, 0): within its length the section distance is this one
-/// scaled by a lean factor of at most 1 (or the top's, or larger), the
-/// length's own term only raising it inside; beyond its length, or outside
-/// it, the distance is positive. False for other pieces.
-[[gnu::always_inline]] inline bool prism_section_plane(const Primitive& p, const Vec3& x, double* c, Vec3* g) {
+/// nose, a sideways move), worked out at a point x (prism_section_plane)
+/// and taken at x + y (section_bound).
+///
+/// Its parts: A, the edge's 2-D signed distance at a point's place in the
+/// section with the move's shear not clamped to the prism's length; the
+/// profile is convex (a wedge no wider than a half plane, rounded), so A is
+/// convex, and so is A composed with the (affine) shear: its tangent plane
+/// P at x lies below it. And the point's place along the move, px, linear.
+/// Within the prism's length its distance is A scaled by the lean of the
+/// nearest face, a factor in [f_min, 1] (f_min from the move's sideways
+/// part), or a larger term (the top's, the box's): so at least P where P
+/// < 0 and f_min P where P >= 0. Beyond its ends it is at least the way
+/// past the end along the move.
+struct SectionPlane {
+  double c = 0;              ///< A at x
+  Vec3 g = Vec3::Zero();     ///< A's gradient at x (world)
+  double px = 0;             ///< the place along the move at x (the prism's frame)
+  Vec3 axis = Vec3::Zero();  ///< px's gradient (world): the prism's cutting direction
+  double lo = 0, hi = 0;     ///< the prism's length: px in [lo, hi]
+  double f_min = 1;          ///< the least lean factor
+};
+
+/// A profile prism's SectionPlane at `x`; false for other pieces.
+[[gnu::always_inline]] inline bool prism_section_plane(const Primitive& p, const Vec3& x, SectionPlane* out) {
   const auto* pp = std::get_if<ProfilePrim>(&p);
   if (!pp || !pp->prism || !(pp->edge.half_angle <= kPi / 2)) return false;
   const double rx = x.x() - pp->origin.x(), ry = x.y() - pp->origin.y(), rz = x.z() - pp->origin.z();
@@ -592,13 +604,29 @@ double distance_below(const Primitive& p, const Vec3& x, double lim);
   const Vec3& d = pp->d_local;
   const double s = px * pp->inv_dx;  // (not clamped)
   double gy = 0, gz = 0;
-  *c = tool::profile_distance_2d(pp->edge, pp->sin_half, pp->cos_half, py - s * d.y(), pz - s * d.z(), &gy, &gz);
+  out->c = tool::profile_distance_2d(pp->edge, pp->sin_half, pp->cos_half, py - s * d.y(), pz - s * d.z(), &gy, &gz);
   // The section's place (py - s d.y, pz - s d.z) moves with px by -d.y/d.x
   // and -d.z/d.x: the gradient in the piece's frame, then the world's.
   const double gx = -(gy * d.y() + gz * d.z()) * pp->inv_dx;
-  *g = Vec3(m(0, 0) * gx + m(1, 0) * gy + m(2, 0) * gz, m(0, 1) * gx + m(1, 1) * gy + m(2, 1) * gz,
-            m(0, 2) * gx + m(1, 2) * gy + m(2, 2) * gz);
+  out->g = Vec3(m(0, 0) * gx + m(1, 0) * gy + m(2, 0) * gz, m(0, 1) * gx + m(1, 1) * gy + m(2, 1) * gz,
+                m(0, 2) * gx + m(1, 2) * gy + m(2, 2) * gz);
+  out->px = px;
+  out->axis = Vec3(m(0, 0), m(0, 1), m(0, 2));
+  out->lo = std::min(0.0, d.x());
+  out->hi = std::max(0.0, d.x());
+  // A face's factor is |d.x| / hypot(|d.x|, g . d) for its unit in-plane
+  // gradient g (prism_factor): never below this.
+  out->f_min = std::fabs(d.x()) / std::sqrt(d.x() * d.x() + d.y() * d.y() + d.z() * d.z());
   return true;
+}
+
+/// The prism's distance at x + y is at least this (see SectionPlane).
+[[gnu::always_inline]] inline double section_bound(const SectionPlane& sp, const Vec3& y) {
+  const double px = sp.px + sp.axis.dot(y);
+  if (px < sp.lo) return sp.lo - px;
+  if (px > sp.hi) return px - sp.hi;
+  const double a = sp.c + sp.g.dot(y);
+  return a >= 0 ? sp.f_min * a : a;
 }
 
 inline double core_radius(const Primitive& p) {
