@@ -286,7 +286,21 @@ TEST(Cli, BenchRunsTheCasesOfAFolder) {
   // A 1 mm flat slot, 0.1 deep, across the 2 mm block: 0.2 mm^3.
   EXPECT_NEAR(j[0]["removed_mm3"].get<double>(), 0.2, 0.002);
   EXPECT_GT(j[0]["kernel_updates_per_s"].get<double>(), 0);
-  EXPECT_GT(j[0]["voxel_updates_per_s"].get<double>(), 0);
+  // The update's rate counts the voxels the slot's band reaches (one more
+  // run counts them): those within 2 voxels (0.04 mm) of the slot, in the
+  // block (2 x 1.08 x 0.14 mm) and at most up to the grid's top, 0.06 mm
+  // over it, and 0.06 mm past its ends (2.12 x 1.08 x 0.2 mm).
+  const double h3 = 0.02 * 0.02 * 0.02, band = j[0]["band_voxels"].get<double>();
+  EXPECT_GT(band, 0.97 * 2 * 1.08 * 0.14 / h3);
+  EXPECT_LT(band, 1.03 * 2.12 * 1.08 * 0.2 / h3);
+  // Culling evaluates fewer; the rates follow from the counts.
+  const double evals = j[0]["voxel_evaluations"].get<double>();
+  EXPECT_GT(evals, 0);
+  EXPECT_LT(evals, band);
+  EXPECT_DOUBLE_EQ(j[0]["evaluated_fraction"].get<double>(), evals / band);
+  EXPECT_DOUBLE_EQ(j[0]["voxel_updates_per_s"].get<double>(), band / j[0]["stock_update_s"].get<double>());
+  EXPECT_DOUBLE_EQ(j[0]["update_to_kernel"].get<double>(),
+                   j[0]["voxel_updates_per_s"].get<double>() / j[0]["kernel_updates_per_s"].get<double>());
   // An unknown case is a missing input.
   EXPECT_EQ(run_cli("bench nope --dir " + dir.path().string(), &out, &err), 66);
 }

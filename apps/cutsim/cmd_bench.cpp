@@ -241,11 +241,16 @@ Action add_bench_command(CLI::App& app) {
       row["threads"] = threads;
       row["repeats_agree"] = same;
       rows.push_back(row);
-      std::printf("%-20s %8d %8d %8.3g %12lld %8.3f %7.0f %9.0f %10.3g %10.3g %6.2f %6.1f %11.6g %11.4g %11.4g %8zu %6zu\n",
+      // Without the band's count (--band-every 0, or nothing cut) its columns say "-".
+      char upd[32] = "-", ratio[32] = "-", share[32] = "-";
+      if (band > 0) {
+        std::snprintf(upd, sizeof upd, "%.3g", vps);
+        std::snprintf(ratio, sizeof ratio, "%.2f", row["update_to_kernel"].get<double>());
+        std::snprintf(share, sizeof share, "%.1f", 100 * row["evaluated_fraction"].get<double>());
+      }
+      std::printf("%-20s %8d %8d %8.3g %12lld %8.3f %7.0f %9.0f %10.3g %10s %6s %6s %11.6g %11.4g %11.4g %8zu %6zu\n",
                   c.c_str(), rep["blocks"].get<int>(), rep["moves"].get<int>(), rep["voxel_size_mm"].get<double>() * 1000,
-                  rep["active_voxels"].get<long long>(), wall, rss,
-                  row["moves_per_s"].get<double>(), eps, vps, row["update_to_kernel"].get<double>(),
-                  100 * row["evaluated_fraction"].get<double>(),
+                  rep["active_voxels"].get<long long>(), wall, rss, row["moves_per_s"].get<double>(), eps, upd, ratio, share,
                   rep["removed_volume_mm3"].get<double>(), row["overcut_mm3"].get<double>(),
                   row["undercut_mm3"].get<double>(), rep["contacts"].size(), rep["axis_limit_violations"].size());
       std::fflush(stdout);
