@@ -571,7 +571,8 @@ double bounded_key(double d, const sweep::Primitive& p) {
 }
 
 // Picks the leaves StockOptions::measure_band_every samples: a hash of
-// the origin, so the same leaves in every run.
+// the origin (MurmurHash3's 64-bit finalizer, for its mixing), so the
+// same leaves in every run.
 std::uint64_t leaf_hash(const Coord& o) {
   std::uint64_t x = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(o.x())) << 42) ^
                     (static_cast<std::uint64_t>(static_cast<std::uint32_t>(o.y())) << 21) ^
