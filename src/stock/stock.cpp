@@ -1385,11 +1385,30 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
       // (a 3 mm flute on a tilted axis) has its box mostly in air or far
       // from its slanted core.
       openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(tree);
+      // The piece's least distance at the voxels of a cube about c (half
+      // diagonal hd), `d` its distance at c: d - hd (outside, where it is
+      // exact; the tests below use it only above 0), and for a torus on its
+      // cutting side its tangent plane's least over the cube, tighter where
+      // the surface lies along the cube's faces (a flat floor: 3.5 voxels,
+      // not 6.1, for a leaf). Passing over more leaves here changes no
+      // voxel: the plane bounds each of them above the band.
+      // (A fly-cutter's torus: its binning and classifying fell 12 %. A
+      // ball line's or a hull's plane cost more than it saved: raster40k's
+      // binning 0.080 -> 0.092 s, the blade's at 2 um 2.44 -> 2.76 s.)
+      const bool planes = std::holds_alternative<sweep::TorusPrim>(p);
+      auto least = [&](const Vec3& c, double hd, double* d) {
+        Vec3 gr;
+        if (!planes || !sweep::convex_distance(p, c, d, &gr)) {
+          *d = sweep::distance(p, c);
+          return *d - hd;
+        }
+        return std::max(*d - hd, *d - hd / std::sqrt(3.0) * gr.cwiseAbs().sum());
+      };
       auto leaf = [&](const Coord& o) {
         if (!acc.probeConstLeaf(o) && acc.getValue(o) > 0) return;  // air tile
         const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
-        const double d = sweep::distance(p, c0);
-        if (d > reach + hd0) return;
+        double d = 0;
+        if (least(c0, hd0, &d) > reach) return;
         // (the test step 2 makes on the smallest distance)
         const bool deep = marks && d < -(g + hd0) && m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
         out.push_back(keys.key(o, deep ? kDeep : id));
@@ -1405,8 +1424,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
             [&](const Vec3& c, double hd, const Coord& bo, int dim) {
               if (dim == kMid && !m.may_hold_material(bo)) return false;
               if (dim == kNode1Dim && !m.node_may_hold_material(bo)) return false;
-              const double d = sweep::distance(p, c);
-              if (d > reach + hd) return false;
+              double d = 0;
+              if (least(c, hd, &d) > reach) return false;
               if (dim == kSub) return true;  // (blocks set to air whole are the occupancy map's: 32^3 or 128^3)
               // Each voxel's distance is then at most -g: air (step 1b).
               if (lip && d <= -(g + hd) && m.roi_index.isInside(CoordBBox::createCube(bo, dim))) {
