@@ -301,6 +301,19 @@ struct Off {
   double norm2() const { return x * x + y * y + z * z; }
 };
 
+// A world point in a piece's frame: m (world to local) applied to w - origin.
+[[gnu::always_inline]] inline Off to_frame(const Eigen::Matrix3d& m, const Vec3& origin, const Vec3& w) {
+  const double rx = w.x() - origin.x(), ry = w.y() - origin.y(), rz = w.z() - origin.z();
+  return {m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
+          m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz};
+}
+
+// A direction in a piece's frame back in the world's: m's transpose applied.
+[[gnu::always_inline]] inline Vec3 from_frame(const Eigen::Matrix3d& m, double gx, double gy, double gz) {
+  return Vec3(m(0, 0) * gx + m(1, 0) * gy + m(2, 0) * gz, m(0, 1) * gx + m(1, 1) * gy + m(2, 1) * gz,
+              m(0, 2) * gx + m(1, 2) * gy + m(2, 2) * gz);
+}
+
 // p less its nearest point on the segment ab.
 [[gnu::always_inline]] inline Off seg_offset(const Off& p, const Off& a, const Off& b) {
   const double abx = b.x - a.x, aby = b.y - a.y, abz = b.z - a.z;
@@ -367,11 +380,8 @@ struct Off {
 
 /// A world point in the piece's frame.
 [[gnu::always_inline]] inline Off to_piece(const LinearPrim& lp, const Vec3& x) {
-  const double rx = x.x() - lp.origin.x(), ry = x.y() - lp.origin.y(), rz = x.z() - lp.origin.z();
-  if (lp.axis_z) return {rx, ry, rz};
-  const Eigen::Matrix3d& m = lp.to_local;
-  return {m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
-          m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz};
+  if (lp.axis_z) return {x.x() - lp.origin.x(), x.y() - lp.origin.y(), x.z() - lp.origin.z()};
+  return to_frame(lp.to_local, lp.origin, x);
 }
 
 /// A ball end's line (LinearPrim with a zero disk radius): the distance to
@@ -386,10 +396,8 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
 // A fly-cutter's swing torus at a world point: the point in the torus's
 // frame and its parts there (tool::torus_at).
 [[gnu::always_inline]] inline tool::TorusAt torus_at(const TorusPrim& tp, const Vec3& w) {
-  const double rx = w.x() - tp.origin.x(), ry = w.y() - tp.origin.y(), rz = w.z() - tp.origin.z();
-  const Eigen::Matrix3d& m = tp.to_local;
-  return tool::torus_at(tp.torus, m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
-                        m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz);
+  const Off q = to_frame(tp.to_local, tp.origin, w);
+  return tool::torus_at(tp.torus, q.x, q.y, q.z);
 }
 
 // Signed distance of an extruded 2D region: `a` the signed in-plane distance,
@@ -425,10 +433,8 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
 // the in-plane part of the move; the side faces lean by that motion, so the
 // in-plane distance is scaled by the lean of the nearest face.
 [[gnu::always_inline]] inline double prism_distance(const ProfilePrim& pp, const Vec3& w) {
-  const double rx = w.x() - pp.origin.x(), ry = w.y() - pp.origin.y(), rz = w.z() - pp.origin.z();
-  const Eigen::Matrix3d& m = pp.to_local;
-  const double px = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, py = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
-               pz = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
+  const Off q = to_frame(pp.to_local, pp.origin, w);
+  const double px = q.x, py = q.y, pz = q.z;
   const Vec3& d = pp.d_local;
   const double s = clamp01(px * pp.inv_dx);
   const double a = prism_section(pp.edge, pp.sin_half, pp.cos_half, d, pp.f_side, pp.f_top, py - s * d.y(), pz - s * d.z());
@@ -454,10 +460,8 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
 // the prism's length it is that prism's distance to the bit.
 [[gnu::always_inline]] inline double joint_part(const JointPrim& jp, const JointPrim::Side& sd, const Vec3& w,
                                                 bool start_cap, bool end_cap) {
-  const double rx = w.x() - sd.origin.x(), ry = w.y() - sd.origin.y(), rz = w.z() - sd.origin.z();
-  const Eigen::Matrix3d& m = jp.to_local;
-  const double x = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, y = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
-               z = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
+  const Off q = to_frame(jp.to_local, sd.origin, w);
+  const double x = q.x, y = q.y, z = q.z;
   double s = x * sd.inv_dx;
   if (start_cap) s = std::max(s, 0.0);
   if (end_cap) s = std::min(s, 1.0);
@@ -540,9 +544,7 @@ double distance_below(const Primitive& p, const Vec3& x, double lim);
     } else {
       const double gu = t.q / (t.D * t.u);
       const double gx = gu * t.x, gy = t.y / t.D, gz = gu * (t.z - tp->torus.swing);
-      const Eigen::Matrix3d& m = tp->to_local;  // its transpose applied
-      *g = Vec3(m(0, 0) * gx + m(1, 0) * gy + m(2, 0) * gz, m(0, 1) * gx + m(1, 1) * gy + m(2, 1) * gz,
-                m(0, 2) * gx + m(1, 2) * gy + m(2, 2) * gz);
+      *g = detail::from_frame(tp->to_local, gx, gy, gz);
     }
     return true;
   }
@@ -562,9 +564,7 @@ double distance_below(const Primitive& p, const Vec3& x, double lim);
     if (lp->axis_z) {
       *g = Vec3(gx, gy, gz);
     } else {
-      const Eigen::Matrix3d& m = lp->to_local;  // its transpose applied
-      *g = Vec3(m(0, 0) * gx + m(1, 0) * gy + m(2, 0) * gz, m(0, 1) * gx + m(1, 1) * gy + m(2, 1) * gz,
-                m(0, 2) * gx + m(1, 2) * gy + m(2, 2) * gz);
+      *g = detail::from_frame(lp->to_local, gx, gy, gz);
     }
   }
   return true;
@@ -597,10 +597,9 @@ struct SectionPlane {
 [[gnu::always_inline]] inline bool prism_section_plane(const Primitive& p, const Vec3& x, SectionPlane* out) {
   const auto* pp = std::get_if<ProfilePrim>(&p);
   if (!pp || !pp->prism || !(pp->edge.half_angle <= kPi / 2)) return false;
-  const double rx = x.x() - pp->origin.x(), ry = x.y() - pp->origin.y(), rz = x.z() - pp->origin.z();
+  const detail::Off q = detail::to_frame(pp->to_local, pp->origin, x);
+  const double px = q.x, py = q.y, pz = q.z;
   const Eigen::Matrix3d& m = pp->to_local;
-  const double px = m(0, 0) * rx + m(0, 1) * ry + m(0, 2) * rz, py = m(1, 0) * rx + m(1, 1) * ry + m(1, 2) * rz,
-               pz = m(2, 0) * rx + m(2, 1) * ry + m(2, 2) * rz;
   const Vec3& d = pp->d_local;
   const double s = px * pp->inv_dx;  // (not clamped)
   double gy = 0, gz = 0;
@@ -608,8 +607,7 @@ struct SectionPlane {
   // The section's place (py - s d.y, pz - s d.z) moves with px by -d.y/d.x
   // and -d.z/d.x: the gradient in the piece's frame, then the world's.
   const double gx = -(gy * d.y() + gz * d.z()) * pp->inv_dx;
-  out->g = Vec3(m(0, 0) * gx + m(1, 0) * gy + m(2, 0) * gz, m(0, 1) * gx + m(1, 1) * gy + m(2, 1) * gz,
-                m(0, 2) * gx + m(1, 2) * gy + m(2, 2) * gz);
+  out->g = detail::from_frame(m, gx, gy, gz);
   out->px = px;
   out->axis = Vec3(m(0, 0), m(0, 1), m(0, 2));
   out->lo = std::min(0.0, d.x());
