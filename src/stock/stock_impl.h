@@ -3,6 +3,7 @@
 #include <atomic>
 #include <cstdint>
 #include <optional>
+#include <unordered_map>
 #include <vector>
 
 #include <openvdb/openvdb.h>
@@ -35,6 +36,35 @@ struct Stock::Impl {
   std::vector<Vec3> scratch_g;
   std::size_t grid_updates = 0;                      // (bench figures, written on the calling thread)
   double bin_s = 0, classify_s = 0, topology_s = 0, voxels_s = 0;
+
+  // A leaf's material against planes: for a piece whose tangent plane at
+  // the leaf's centre c bounds it below (d(p) >= d + g . (p - c)), a voxel
+  // changes only where d(p) + v(p) < 0, and min over the voxels of
+  // v(p) + g . (p - c) is bounded by these (LeafPlanes::least). Values only
+  // rise as the stock is cut, so kept figures stay lower bounds however
+  // stale: they are refreshed where the update leaves a leaf, for speed.
+  struct LeafPlanes {
+    float low;     // least value
+    float up[3];   // least of v(p) + (p_k - c_k), mm
+    float down[3]; // least of v(p) - (p_k - c_k)
+    static LeafPlanes of_leaf(const float* data, double h, float gamma);
+    static LeafPlanes of_tile(float value, double h, float gamma);
+    /// A lower bound for min over the leaf's voxels of v(p) + g . (p - c).
+    double least(const Vec3& g, double h) const;
+  };
+  struct CoordHash {
+    std::size_t operator()(const openvdb::Coord& c) const {
+      return (static_cast<std::size_t>(static_cast<std::uint32_t>(c.x())) * 73856093u) ^
+             (static_cast<std::size_t>(static_cast<std::uint32_t>(c.y())) * 19349663u) ^
+             (static_cast<std::size_t>(static_cast<std::uint32_t>(c.z())) * 83492791u);
+    }
+  };
+  // Kept only once a cut brings a piece that uses them (a fly-cutter's
+  // torus): every leaf then, refreshed by each update.
+  bool planes_on = false;
+  std::unordered_map<openvdb::Coord, LeafPlanes, CoordHash> leaf_planes;
+  /// Starts keeping leaf_planes, from every leaf of the tree.
+  void start_leaf_planes();
 
   Vec3 index_to_world(const openvdb::Coord& c) const {
     return origin + h * Vec3(c.x(), c.y(), c.z());
