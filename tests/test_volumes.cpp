@@ -169,6 +169,56 @@ TEST(Volume, BandVoxelsAreTheCylindersAroundEachMove) {
   EXPECT_NEAR(count({whole}, 4), one, 0.1 * one);
 }
 
+// A fly-cutter pass 3 um above the floor a deeper pass left: the binning
+// passes over the leaves its torus's plane leaves whole, but the band's
+// count still takes them, as a plain update would visit them. On a box
+// stock whose ROI is the box, that is every voxel centre of the ROI nearer
+// the torus than the band's half width, on a fresh stock or after the
+// deeper pass (which leaves no air tiles): counted here one by one.
+TEST(Volume, BandVoxelsOfAFlyCutPassCountTheFloorAPassBeforeLeft) {
+  const double h = 0.01;
+  const Aabb box{Vec3(-1, -1, -0.5), Vec3(1, 1, 0)};
+  auto pass = [](double z) {
+    Pose pose = Pose::Identity();
+    pose.translation() = Vec3(0.004, -0.003, z);
+    return sweep::sweep_tori({pose}, tool::SwingTorus{3, 0.5});
+  };
+  stock::StockOptions so;
+  so.voxel_mm = h;
+  so.measure_band_every = 1;
+  auto brute = [&](const sweep::Sweep& sw) {
+    const stock::Stock s(box, box, so);
+    const double g = s.band_mm();
+    const Vec3 lattice = s.roi_lattice_origin();
+    const Aabb r = s.roi(), reach = sweep::bounds(sw.prims.at(0)).expanded(g + h).intersected(r);
+    double n = 0;
+    for (double x = lattice.x() + h * std::ceil((reach.min.x() - lattice.x()) / h); x <= reach.max.x(); x += h)
+      for (double y = lattice.y() + h * std::ceil((reach.min.y() - lattice.y()) / h); y <= reach.max.y(); y += h)
+        for (double z = lattice.z() + h * std::ceil((reach.min.z() - lattice.z()) / h); z <= reach.max.z(); z += h) {
+          const Vec3 p(x, y, z);
+          if (((p - r.min).array() < 0.5 * h - 1e-9).any() || ((r.max - p).array() < 0.5 * h - 1e-9).any()) continue;
+          n += sweep::distance(sw.prims.at(0), p) < g;
+        }
+    return n;
+  };
+  auto count = [&](const std::vector<double>& depths, double* removed) {
+    stock::Stock s(box, box, so);
+    for (double z : depths) s.subtract(pass(z));  // one update each: the second sees the first's floor
+    *removed = s.removed_volume_mm3();
+    return static_cast<double>(s.stats().band_voxels);
+  };
+  double deep_removed = 0, shallow_removed = 0, both_removed = 0;
+  const double deep = count({-0.006}, &deep_removed), shallow = count({-0.003}, &shallow_removed);
+  const double both = count({-0.006, -0.003}, &both_removed);
+  const double shallow_exact = brute(pass(-0.003)), deep_exact = brute(pass(-0.006));
+  EXPECT_GT(shallow_exact, 1e3);
+  EXPECT_NEAR(shallow, shallow_exact, 1e-3 * shallow_exact);
+  EXPECT_NEAR(deep, deep_exact, 1e-3 * deep_exact);
+  EXPECT_GT(deep_removed, shallow_removed);
+  EXPECT_EQ(both_removed, deep_removed);  // the shallow pass cuts nothing
+  EXPECT_NEAR(both, deep_exact + shallow_exact, 1e-3 * shallow_exact);
+}
+
 // A batch subtracts the union of its sweeps: every voxel value equals the
 // one-move-at-a-time result, also when moves repeat and reverse (the
 // pathological case for the batch's bounds: identical pieces).

@@ -1507,8 +1507,9 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
         if (least(c0, hd0, &d, &gr) > reach) return;
         // Its plane against the leaf's material (Impl::LeafPlanes): where
         // that leaves d(p) + v(p) >= 0 at every voxel, none changes. (The
-        // margin: far above the arithmetic's rounding, far below a voxel.)
-        if (m.planes_on && !std::isnan(gr.x())) {
+        // margin: far above the arithmetic's rounding, far below a voxel.
+        // Not when measuring the bands' reach: that counts such leaves.)
+        if (m.planes_on && !m.measure_band_every && !std::isnan(gr.x())) {
           const Impl::LeafPlanes* lp = nullptr;
           Impl::LeafPlanes tile;
           if (lf) {
