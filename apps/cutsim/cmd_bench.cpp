@@ -139,11 +139,14 @@ Action add_bench_command(CLI::App& app) {
       if (!fs::exists(fs::path(nc).replace_extension(".toml"))) throw InputError(nc.string(), "the case has no job file beside it");
     }
     const int threads = a->threads > 0 ? a->threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-    double kernel = 0;
-    {
+    // The kernel, measured before each timed run (the machine's speed
+    // drifts by some 10 % over minutes, and a case's runs take minutes): a
+    // case's ratio is to the median of its runs' kernels.
+    auto kernel_now = [threads] {
       tbb::global_control gc(tbb::global_control::max_allowed_parallelism, static_cast<std::size_t>(threads));
-      kernel = kernel_rate(threads);
-    }
+      return kernel_rate(threads);
+    };
+    const double kernel0 = kernel_now();
     const std::string exe = fs::read_symlink("/proc/self/exe").string();
     char tmpl[] = "/tmp/cutsim-bench-out-XXXXXX";
     const char* od = ::mkdtemp(tmpl);
@@ -151,15 +154,16 @@ Action add_bench_command(CLI::App& app) {
     const std::string outdir = od;
 
     nlohmann::ordered_json rows = nlohmann::ordered_json::array();
-    std::printf("kernel: %.3g voxel updates/s on %d thread%s (ball-end distance, max, write back, in cache)\n", kernel,
-                threads, threads == 1 ? "" : "s");
+    std::printf("kernel: %.3g voxel updates/s on %d thread%s (ball-end distance, max, write back, in cache; "
+                "measured again before each run, /kern is to the case's median)\n",
+                kernel0, threads, threads == 1 ? "" : "s");
     std::printf("%-20s %8s %8s %8s %12s %8s %7s %9s %10s %10s %6s %6s %11s %11s %11s %8s %6s\n", "case", "blocks",
                 "moves", "voxel_um", "active_vox", "wall_s", "rss_MB", "moves/s", "eval/s", "vox_upd/s", "/kern", "eval%",
                 "removed_mm3", "over_mm3", "under_mm3", "contacts", "axis");
     int worst = 0;
     for (const auto& c : cases) {
       const std::string nc = (fs::path(a->dir) / (c + ".nc")).string();
-      std::vector<double> walls, sims, upds;
+      std::vector<double> walls, sims, upds, kernels;
       double rss = 0;
       bool same = true;  // every repeat gave the results of the first
       nlohmann::json rep, first;
@@ -167,6 +171,7 @@ Action add_bench_command(CLI::App& app) {
       const int runs = a->repeat + (a->band_every > 0 ? 1 : 0);
       for (int r = 0; r < runs; ++r) {
         const bool counting = r == a->repeat;  // last, untimed: its counting costs more than the update
+        if (!counting) kernels.push_back(kernels.empty() && &c == &cases.front() ? kernel0 : kernel_now());
         std::string out, err;
         const int code = run_child(quote(exe) + " run " + quote(nc) + " --format json --threads " +
                                        std::to_string(threads) +
@@ -207,6 +212,7 @@ Action add_bench_command(CLI::App& app) {
       const double wall = median(walls);
       const double sim_s = median(sims);
       const double upd_s = median(upds);
+      const double kernel = median(kernels);
       if (!same) std::fprintf(stderr, "cutsim bench: warning: case %s gave different results in its repeats\n", c.c_str());
       const double evals = rep.value("voxel_evaluations", 0.0);
       const double moves = rep["moves"].get<double>();
