@@ -52,17 +52,10 @@ struct Stock::Impl {
     /// A lower bound for min over the leaf's voxels of v(p) + g . (p - c).
     double least(const Vec3& g, double h) const;
   };
-  struct CoordHash {
-    std::size_t operator()(const openvdb::Coord& c) const {
-      return (static_cast<std::size_t>(static_cast<std::uint32_t>(c.x())) * 73856093u) ^
-             (static_cast<std::size_t>(static_cast<std::uint32_t>(c.y())) * 19349663u) ^
-             (static_cast<std::size_t>(static_cast<std::uint32_t>(c.z())) * 83492791u);
-    }
-  };
   // Kept only once a cut brings a piece that uses them (a fly-cutter's
   // torus): every leaf then, refreshed by each update.
   bool planes_on = false;
-  std::unordered_map<openvdb::Coord, LeafPlanes, CoordHash> leaf_planes;
+  std::unordered_map<openvdb::Coord, LeafPlanes> leaf_planes;  // (OpenVDB's std::hash<Coord>)
   /// Starts keeping leaf_planes, from every leaf of the tree.
   void start_leaf_planes();
 
