@@ -38,9 +38,10 @@ TEST(Cases, SameBytesEveryRunAndTheCommittedFilesAreCurrent) {
     ASSERT_EQ(a.size(), b.size());
     for (std::size_t i = 0; i < a.size(); ++i) {
       EXPECT_EQ(a[i].bytes, b[i].bytes) << a[i].path;
-      if (a[i].committed)
+      if (a[i].committed) {
         EXPECT_EQ(slurp(std::string(CUTSIM_SOURCE_DIR) + "/" + a[i].path), a[i].bytes)
             << a[i].path << " differs from what cutsim-cases writes: run it and commit";
+      }
     }
   }
   EXPECT_THROW(cases::find_case("nosuch"), UsageError);

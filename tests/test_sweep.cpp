@@ -223,7 +223,7 @@ TEST(Sweep, FlyCutterTorusGivesATangentPlaneBelowItOnItsCuttingSide) {
         const Vec3 local = tp.to_local * (x - tp.origin);
         const double u = std::hypot(local.x(), local.z() - st.swing);
         double dx = 0;
-        Vec3 g;
+        Vec3 g = Vec3::Zero();
         const bool ok = sweep::convex_distance(p, x, &dx, &g);
         // The torus at rest, in its own frame: the same distance.
         EXPECT_NEAR(sweep::distance(p, x), tool::shape_distance(tool::Shape(st), local), 1e-12);
