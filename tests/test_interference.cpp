@@ -287,6 +287,54 @@ TEST(Interference, MovesOfOneBatchSeeTheMaterialTheEarlierOnesRemoved) {
   EXPECT_TRUE(line4);
 }
 
+// Moves are scanned side by side in groups before they are checked in
+// order; a scan stands only where nothing was subtracted since, or where
+// it found no touch. The contacts (lines, regions, depths, points, poses)
+// and the cut must be those of checking one move at a time: on a rapid
+// retracting through the slot the moves before it cut (its first poses
+// find the held-back cuts' material, whose subtraction must void the
+// rest of its scans), a rapid back into that slot, a retract scanned
+// before a batch was subtracted, and the nose tool's flank contacts.
+TEST(Interference, MovesScannedSideBySideGiveTheContactsOfOneAtATime) {
+  TempDir dir;
+  struct Case {
+    std::string program, tool;
+    Aabb box;
+  };
+  const std::vector<Case> cases = {
+      {"G0 X0 Y0 Z1\nG1 Z-0.5 F100\nG1 X3\nG1 Z-1.5\nG1 X0\nG0 Z1\nG0 Z-1\nG0 Z1\nG0 X3\nG1 Z-1.2\nG0 Z1\nM30\n",
+       "ball:d=1,l=1,shank_d=0.8", Aabb{Vec3(-2, -2, -2), Vec3(5, 2, 0)}},
+      // The batch of eight is subtracted after line 10, in the second group:
+      // the retract on line 11 was scanned before that, on the material its
+      // lines had not yet cut (and no cut is held back when it is checked).
+      {"G0 X0 Y0 Z1\nG1 Z-0.5 F100\nG1 X1\nG1 X2\nG1 X3\nG1 X2.5\nG1 X2\nG1 X1.5\nG1 X1\nG0 Z1\nM30\n",
+       "ball:d=1,l=1,shank_d=0.8", Aabb{Vec3(-2, -2, -2), Vec3(5, 2, 0)}},
+      {slope_program(8), "nose:r=0.5,clearance=5", Aabb{Vec3(0, -1.5, -1), Vec3(4, 1.5, 0)}},
+  };
+  for (const Case& c : cases) {
+    sim::SimOptions o;
+    o.program = dir.write("prog.nc", c.program);
+    o.tool = tool::parse_tool_spec(c.tool);
+    o.stock_box = c.box;
+    o.voxel_mm = 0.02;
+    o.check_group = 1;
+    const auto one = sim::simulate(o);
+    o.check_group = 8;
+    const auto grouped = sim::simulate(o);
+    ASSERT_EQ(one.contacts.size(), grouped.contacts.size()) << c.program;
+    for (std::size_t i = 0; i < one.contacts.size(); ++i) {
+      const auto &a = one.contacts[i], &b = grouped.contacts[i];
+      EXPECT_EQ(a.line, b.line);
+      EXPECT_EQ(a.region, b.region);
+      EXPECT_EQ(a.rapid, b.rapid);
+      EXPECT_EQ(a.depth_mm, b.depth_mm);
+      EXPECT_EQ(a.where, b.where);
+      EXPECT_EQ(a.poses, b.poses);
+    }
+    EXPECT_EQ(one.stock->removed_volume_mm3(), grouped.stock->removed_volume_mm3());
+  }
+}
+
 // The contact check leaves a batch's cuts held back unless they would
 // change the voxel where it found the deepest overlap (they only take
 // material away, so nowhere else gets deeper). That answer may be yes

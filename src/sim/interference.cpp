@@ -25,13 +25,14 @@ double InterferenceChecker::pose_spacing(const tool::Tool& t, double voxel_mm) {
   return std::max(s, 2 * voxel_mm);
 }
 
-bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
-                                const PendingCuts* pending) {
+void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
+                               const std::function<void()>& on_pose,
+                               const std::function<void(const std::string& region, int pose, Scan scan)>& on_scan) const {
   const bool rapid = m.kind == motion::MotionKind::rapid;
   std::vector<tool::Region> regions = tool::contact_regions(tool);
   const tool::Shape cut = tool::cutting_shape(tool);
   if (rapid && !std::holds_alternative<tool::EdgeProfile>(cut)) regions.push_back({"cutter", cut});
-  if (regions.empty()) return false;
+  if (regions.empty()) return;
 
   // Poses: evenly spaced along the tip's path (sampled for multi-axis moves).
   const Pose p0 = planner_.pose_at(m, pm, 0.0);
@@ -60,13 +61,12 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
   // from the pose before, exactly, so nothing hides between poses; the
   // flank body, at each pose (poses at most half its length apart).
   auto swept = [](const tool::Shape& sh) { return !std::holds_alternative<tool::FlankBody>(sh); };
-  bool touched = false;
   Pose prev = p0;
   for (int k = 1; k <= n; ++k) {
     const double s = static_cast<double>(k) / n;
     const double s_prev = static_cast<double>(k - 1) / n;
     const Pose pose = planner_.pose_at(m, pm, s);
-    ++pose_index_;
+    if (on_pose) on_pose();
     // Skip poses whose regions all miss the material's reach.
     bool any = false;
     std::vector<Aabb> boxes;
@@ -95,24 +95,25 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     prev = pose;
     if (!any) continue;
     // What the cutting part removed from the move's start to this pose.
-    sweep::Sweep so_far;
-    if (!rapid) so_far = planner_.sweep_part(m, pm, tool, 0.0, s);
-    auto so_far_d = [&so_far](const Vec3& x, double) { return so_far.distance(x); };
+    auto so_far = std::make_shared<sweep::Sweep>();
+    if (!rapid) *so_far = planner_.sweep_part(m, pm, tool, 0.0, s);
     for (std::size_t i = 0; i < regions.size(); ++i) {
       if (!boxes[i].overlaps(reach)) continue;
-      const tool::Shape& shape = regions[i].shape;
-      const sweep::Sweep& sw = sweeps[i];
-      // (A flank body with its angles' sines worked out once for the pose.)
-      const auto* flank = std::get_if<tool::FlankBody>(&shape);
-      const tool::FlankTrig trig = flank ? tool::flank_trig(*flank) : tool::FlankTrig{};
-      auto overlap = [&](const std::function<double(const Vec3&, double)>& removed) {
-        if (!sw.prims.empty())
-          return stock_.overlap(boxes[i], [&](const Vec3& x) { return sw.distance(x); }, removed, tol_);
-        if (flank) {  // convex: its tangent plane bounds the scan's quarters
-          const Pose inv = at[i].inverse();
-          const Eigen::Matrix3d rot = at[i].linear();  // the body's gradient into the workpiece frame
+      // The scan owns what it needs: it may run after this walk.
+      on_scan(regions[i].name, k, [this, so_far, box = boxes[i], at = at[i], shape = regions[i].shape,
+                                   sw = std::move(sweeps[i])]() {
+        using Removed = std::function<double(const Vec3&, double)>;
+        const Removed removed =
+            so_far->prims.empty() ? Removed() : Removed([&](const Vec3& x, double) { return so_far->distance(x); });
+        if (!sw.prims.empty()) return stock_.overlap(box, [&](const Vec3& x) { return sw.distance(x); }, removed, tol_);
+        if (const auto* flank = std::get_if<tool::FlankBody>(&shape)) {
+          // Convex: its tangent plane bounds the scan's quarters (with its
+          // angles' sines worked out once for the pose).
+          const tool::FlankTrig trig = tool::flank_trig(*flank);
+          const Pose inv = at.inverse();
+          const Eigen::Matrix3d rot = at.linear();  // the body's gradient into the workpiece frame
           return stock_.overlap(
-              boxes[i], [&](const Vec3& x) { return tool::flank_distance(*flank, trig, inv * x); }, removed, tol_,
+              box, [&](const Vec3& x) { return tool::flank_distance(*flank, trig, inv * x); }, removed, tol_,
               [&](const Vec3& x, Vec3* g) {
                 Vec3 gl;
                 const double d = tool::flank_distance(*flank, trig, inv * x, &gl);
@@ -120,45 +121,78 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
                 return d;
               });
         }
-        return stock_.overlap(boxes[i],
-                              [&, inv = at[i].inverse()](const Vec3& x) { return tool::shape_distance(shape, inv * x); },
+        return stock_.overlap(box, [&, inv = at.inverse()](const Vec3& x) { return tool::shape_distance(shape, inv * x); },
                               removed, tol_);
-      };
-      stock::Overlap ov = overlap(so_far.prims.empty() ? nullptr : std::function<double(const Vec3&, double)>(so_far_d));
-      // The batch's pending cuts only take material away: without a
-      // contact on the stock as it is, there is none after them either, and
-      // where they leave the deepest voxel as it is, that stays the deepest
-      // (and the first of its depth in the scan's order). Else they are
-      // subtracted and the pose tested again.
-      if (ov.depth_mm > tol_ && pending && pending->change(ov.where, ov.stock_value) && pending->flush())
-        ov = overlap(so_far.prims.empty() ? nullptr : std::function<double(const Vec3&, double)>(so_far_d));
-      if (ov.depth_mm <= tol_) continue;
-      touched = true;
-      // Merge with the record of this region on this line at the pose before.
-      Contact* rec = nullptr;
-      for (auto it = contacts_.rbegin(); it != contacts_.rend() && it - contacts_.rbegin() < 8; ++it)
-        if (it->line == m.line && it->region == regions[i].name && it->rapid == rapid &&
-            it->last_pose == pose_index_ - 1) {
-          rec = &*it;
-          break;
-        }
-      if (!rec) {
-        Contact c;
-        c.line = m.line;
-        c.text = m.text ? *m.text : std::string();
-        c.region = regions[i].name;
-        c.rapid = rapid;
-        contacts_.push_back(c);
-        rec = &contacts_.back();
-      }
-      rec->poses += 1;
-      rec->last_pose = pose_index_;
-      if (ov.depth_mm > rec->depth_mm) {
-        rec->depth_mm = ov.depth_mm;
-        rec->where = ov.where;
-        rec->at_least = ov.at_least;
-      }
+      });
     }
+  }
+}
+
+InterferenceChecker::FirstScans InterferenceChecker::first_scans(const motion::Move& m, const PlannedMove& pm,
+                                                                const tool::Tool& tool) const {
+  FirstScans out;
+  walk(m, pm, tool, [&] { ++out.poses; }, [&](const std::string& region, int pose, Scan scan) {
+    FirstScans::Job job{pose, region, std::move(scan), {}};
+    job.found = job.scan();
+    out.jobs.push_back(std::move(job));
+  });
+  return out;
+}
+
+bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
+                                const PendingCuts* pending, const FirstScans* first) {
+  const bool rapid = m.kind == motion::MotionKind::rapid;
+  bool touched = false;
+  bool current = first && first->current;  // (until this check subtracts the pending cuts)
+  auto take = [&](const std::string& region, const stock::Overlap* found, const Scan& scan) {
+    // A scan made earlier stands where the stock has not changed since,
+    // and where it found no touch (the stock only loses material).
+    stock::Overlap ov = found && (current || found->depth_mm <= tol_) ? *found : scan();
+    // The batch's pending cuts only take material away: without a
+    // contact on the stock as it is, there is none after them either, and
+    // where they leave the deepest voxel as it is, that stays the deepest
+    // (and the first of its depth in the scan's order). Else they are
+    // subtracted and the pose tested again.
+    if (ov.depth_mm > tol_ && pending && pending->change(ov.where, ov.stock_value) && pending->flush()) {
+      current = false;
+      ov = scan();
+    }
+    if (ov.depth_mm <= tol_) return;
+    touched = true;
+    // Merge with the record of this region on this line at the pose before.
+    Contact* rec = nullptr;
+    for (auto it = contacts_.rbegin(); it != contacts_.rend() && it - contacts_.rbegin() < 8; ++it)
+      if (it->line == m.line && it->region == region && it->rapid == rapid && it->last_pose == pose_index_ - 1) {
+        rec = &*it;
+        break;
+      }
+    if (!rec) {
+      Contact c;
+      c.line = m.line;
+      c.text = m.text ? *m.text : std::string();
+      c.region = region;
+      c.rapid = rapid;
+      contacts_.push_back(c);
+      rec = &contacts_.back();
+    }
+    rec->poses += 1;
+    rec->last_pose = pose_index_;
+    if (ov.depth_mm > rec->depth_mm) {
+      rec->depth_mm = ov.depth_mm;
+      rec->where = ov.where;
+      rec->at_least = ov.at_least;
+    }
+  };
+  if (first) {
+    const long base = pose_index_;
+    for (const FirstScans::Job& job : first->jobs) {
+      pose_index_ = base + job.pose;
+      take(job.region, &job.found, job.scan);
+    }
+    pose_index_ = base + first->poses;
+  } else {
+    walk(m, pm, tool, [&] { ++pose_index_; },
+         [&](const std::string& region, int, const Scan& scan) { take(region, nullptr, scan); });
   }
   return touched;
 }

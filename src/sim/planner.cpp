@@ -76,7 +76,8 @@ JointValues Planner::with_laser_error(JointValues q, double t) const {
     if (j.laser) {
       const std::size_t i = static_cast<std::size_t>(machine::axis_index(j.axis));
       const double e = machine::laser_position_error_mm(n_ref_, n, j.laser->dead_path_mm, q[i] - j.laser->origin_mm);
-      max_laser_ = std::max(max_laser_, std::fabs(e));
+      for (double was = max_laser_.load(); std::fabs(e) > was && !max_laser_.compare_exchange_weak(was, std::fabs(e));) {
+      }
       q[i] += e;
     }
   return q;

@@ -7,6 +7,9 @@
 #include <sstream>
 #include <sys/resource.h>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include "cutsim/core/error.h"
 #include "cutsim/core/interrupt.h"
 #include "cutsim/gcode/program_reader.h"
@@ -393,10 +396,12 @@ SimResult simulate(const SimOptions& opt) {
   std::size_t pending_prims = 0;
   int pending_last_line = 0;
   double flush_s = 0;  // stock update time spent inside the contact check
+  std::size_t stock_changes = 0;  // subtractions so far
   auto flush = [&] {
     if (pending.empty()) return;
     const auto t = Clock::now();
     res.stock->subtract(pending);
+    ++stock_changes;
     const double s = seconds_since(t);
     res.timing.stock_update_s += s;
     flush_s += s;
@@ -422,37 +427,75 @@ SimResult simulate(const SimOptions& opt) {
     return any;
   };
   try {
+  // Moves are checked in groups: their first scans side by side on the
+  // stock as it is (they only read it), then each move in order, where a
+  // scan stands unless a subtraction since makes it stale (and it found a
+  // touch): the same contacts and cuts as move by move, with the second
+  // thread busy where most scans are too small to share. (One at a time
+  // when stopping at the first contact: the moves after it must not be
+  // joined to it.)
+  struct Held {
+    motion::Move m;
+    PlannedMove pm;
+    const tool::Tool* tool;
+    sweep::Sweep sw;
+  };
+  const std::size_t group_size = stop_at_contact ? 1 : std::max<std::size_t>(1, opt.check_group);
+  std::vector<Held> group;
+  std::vector<InterferenceChecker::FirstScans> firsts;
+  auto check_group = [&] {
+    if (group.empty()) return;
+    firsts.assign(group.size(), {});
+    const auto t1 = Clock::now();
+    if (group.size() > 1) {
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, group.size(), 1), [&](const auto& r) {
+        for (std::size_t j = r.begin(); j != r.end(); ++j)
+          firsts[j] = checker.first_scans(group[j].m, group[j].pm, *group[j].tool);
+      });
+    }
+    res.timing.contact_check_s += seconds_since(t1);
+    const std::size_t subtractions = stock_changes;
+    for (std::size_t j = 0; j < group.size(); ++j) {
+      const motion::Move& m = group[j].m;
+      const auto t2 = Clock::now();
+      flush_s = 0;
+      firsts[j].current = stock_changes == subtractions;
+      const bool touched = checker.check(m, group[j].pm, *group[j].tool, &held, group.size() > 1 ? &firsts[j] : nullptr);
+      res.timing.contact_check_s += seconds_since(t2) - flush_s;
+      sweep::Sweep& sw = group[j].sw;
+      if (!sw.prims.empty() && sw.bounds.overlaps(res.stock->roi().expanded(res.stock->band_mm() + res.voxel_mm))) {
+        pending_prims += sw.prims.size();
+        pending.push_back(std::move(sw));
+      }
+      pending_last_line = m.line;
+      if (pending.empty() && !interrupted()) res.last_line_cut = m.line;  // nothing of it waits to be cut
+      if (pending.size() >= batch_moves || pending_prims >= kBatchPrims ||
+          (touched && stop_at_contact))
+        flush();
+      if (interrupted())
+        throw InterruptedError(SourceLocation{opt.program, m.line, 0, m.text ? *m.text : std::string()},
+                               interrupt_signal().load(), "interrupted while cutting line " + std::to_string(m.line));
+      ++done;
+      if (opt.progress && (done % 64 == 0 || done == total_moves))
+        opt.progress(static_cast<double>(done) / std::max(total_moves, 1), m.line);
+      if (touched && stop_at_contact) {
+        cut_tail();
+        throw StopAtContact{};
+      }
+    }
+    group.clear();
+  };
   stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
     const auto t0 = Clock::now();
     const tool::Tool& t = tool_for(m);
     const PlannedMove pm = planner.plan(m);
     sweep::Sweep sw = planner.sweep(m, pm, t);
     join(sw);
-    const auto t1 = Clock::now();
-    flush_s = 0;
-    const bool touched = checker.check(m, pm, t, &held);
-    res.timing.plan_sweep_s += std::chrono::duration<double>(t1 - t0).count();
-    res.timing.contact_check_s += seconds_since(t1) - flush_s;
-    if (!sw.prims.empty() && sw.bounds.overlaps(res.stock->roi().expanded(res.stock->band_mm() + res.voxel_mm))) {
-      pending_prims += sw.prims.size();
-      pending.push_back(std::move(sw));
-    }
-    pending_last_line = m.line;
-    if (pending.empty() && !interrupted()) res.last_line_cut = m.line;  // nothing of it waits to be cut
-    if (pending.size() >= batch_moves || pending_prims >= kBatchPrims ||
-        (touched && stop_at_contact))
-      flush();
-    if (interrupted())
-      throw InterruptedError(SourceLocation{opt.program, m.line, 0, m.text ? *m.text : std::string()},
-                             interrupt_signal().load(), "interrupted while cutting line " + std::to_string(m.line));
-    ++done;
-    if (opt.progress && (done % 64 == 0 || done == total_moves))
-      opt.progress(static_cast<double>(done) / std::max(total_moves, 1), m.line);
-    if (touched && stop_at_contact) {
-      cut_tail();
-      throw StopAtContact{};
-    }
+    res.timing.plan_sweep_s += seconds_since(t0);
+    group.push_back({m, pm, &t, std::move(sw)});
+    if (group.size() >= group_size) check_group();
   });
+  check_group();
   cut_tail();
   } catch (const InterruptedError& e) {
     if (!opt.keep_partial) throw;

@@ -46,14 +46,40 @@ public:
   };
   InterferenceChecker(const stock::Stock& stock, const Planner& planner, double tolerance_mm,
                       double sweep_tolerance_mm);
-  /// Returns true when this move touched.
+  /// The first scan of each pose and region `check` makes for this move,
+  /// on the stock as it is, in check's order, with what it needs to be
+  /// made again. Changes nothing: the moves of a group can be scanned side
+  /// by side, then checked in order.
+  struct FirstScans {
+    struct Job {
+      int pose = 0;  ///< 1-based, of `poses`
+      std::string region;
+      std::function<stock::Overlap()> scan;
+      stock::Overlap found;  ///< what it found
+    };
+    std::vector<Job> jobs;
+    int poses = 0;
+    /// The stock has not changed since: every scan stands. Else only those
+    /// that found no touch (the stock has only lost material since).
+    bool current = false;
+  };
+  FirstScans first_scans(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool) const;
+  /// Returns true when this move touched. With `first` (first_scans of
+  /// this move), the scans that stand are not made again.
   bool check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
-             const PendingCuts* pending = nullptr);
+             const PendingCuts* pending = nullptr, const FirstScans* first = nullptr);
   const std::vector<Contact>& contacts() const { return contacts_; }
   /// Poses between tested ones along a move, mm (half the smallest region).
   static double pose_spacing(const tool::Tool& t, double voxel_mm);
 
 private:
+  using Scan = std::function<stock::Overlap()>;
+  /// Calls on_pose for each pose, and on_scan for each region a pose
+  /// brings near the material, with the scan of that region at that pose
+  /// (against the stock less what the move cut before it).
+  void walk(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool, const std::function<void()>& on_pose,
+            const std::function<void(const std::string& region, int pose, Scan scan)>& on_scan) const;
+
   const stock::Stock& stock_;
   const Planner& planner_;
   double tol_, sweep_tol_;

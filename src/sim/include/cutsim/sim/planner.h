@@ -1,6 +1,7 @@
 #pragma once
 // Moves on a machine: joint values, durations on the program's time line,
 // tool poses along the move, and the swept region they cut.
+#include <atomic>
 #include <memory>
 #include <optional>
 
@@ -51,7 +52,7 @@ public:
   void monitor(const motion::Move& m, const PlannedMove& p, machine::AxisMonitor& mon) const;
 
   double time_s() const { return time_; }
-  double max_laser_error_mm() const { return max_laser_; }
+  double max_laser_error_mm() const { return max_laser_.load(); }
   const std::string& file() const { return file_; }
   void set_file(std::string f) { file_ = std::move(f); }
 
@@ -71,7 +72,8 @@ private:
   Options opt_;
   double time_ = 0;
   double n_ref_ = 1;
-  mutable double max_laser_ = 0;
+  /// (Atomic: the contact check scans moves side by side.)
+  mutable std::atomic<double> max_laser_{0};
   bool exact_ = false;  // identity kinematics and no laser error
   std::string file_;
 };

@@ -48,6 +48,9 @@ struct SimOptions {
   bool keep_partial = false;
   /// --measure-band N: stock::StockOptions::measure_band_every (a bench figure).
   std::size_t measure_band_every = 0;
+  /// Moves whose contact scans run side by side before they are checked
+  /// in order (the results do not depend on it; 1: one move at a time).
+  std::size_t check_group = 8;
   /// Bounds of the target, when there is one: a target that misses the
   /// stock is refused before any grid is built.
   std::optional<Aabb> target_bounds;
