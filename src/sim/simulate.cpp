@@ -9,6 +9,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include "cutsim/core/error.h"
 #include "cutsim/core/interrupt.h"
@@ -328,18 +329,18 @@ SimResult simulate(const SimOptions& opt) {
     Planner planner(kin, iopt.initial, plopt);
     planner.set_file(opt.program);
     machine::AxisMonitor mon(mach, machine::joints_of(iopt.initial));
-    stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
-      ++total_moves;
-      const PlannedMove pm = planner.plan(m);
-      planner.monitor(m, pm, mon);
+    // What a move reaches of the stock (the union of boxes does not depend
+    // on the order: moves are planned in order, then measured side by side
+    // in groups).
+    auto reach_of = [&](const motion::Move& m, const PlannedMove& pm, const tool::Tool& t) {
+      Aabb out;
       // Piece by piece: a sampled rotary move's overall box can span the
       // whole stock while its pieces pass outside it.
-      const tool::Tool& t = tool_for(m);
       const sweep::Sweep sw = planner.sweep(m, pm, t);
       if (sw.bounds.overlaps(stock_reach))
         for (const auto& prim : sw.prims) {
           const Aabb& b = sweep::bounds(prim);
-          if (b.overlaps(stock_reach)) roi.extend(b.intersected(stock_reach));
+          if (b.overlaps(stock_reach)) out.extend(b.intersected(stock_reach));
         }
       // The regions that must not touch: where they reach into the stock,
       // the grid must hold the material they might meet.
@@ -349,10 +350,39 @@ SimResult simulate(const SimOptions& opt) {
         for (int i = 0; i <= n; ++i) {
           const Pose q = planner.pose_at(m, pm, static_cast<double>(i) / n) * r.frame;
           const Aabb b = sweep::world_box(lb, q.linear(), q.translation()).expanded(n > 1 ? 0.1 * lb.size().norm() : 0.0);
-          if (b.overlaps(stock_reach)) roi.extend(b.intersected(stock_reach));
+          if (b.overlaps(stock_reach)) out.extend(b.intersected(stock_reach));
         }
       }
+      return out;
+    };
+    struct Planned {
+      motion::Move m;
+      PlannedMove pm;
+      const tool::Tool* tool;
+    };
+    std::vector<Planned> planned;
+    auto measure = [&] {
+      const Aabb got = tbb::parallel_reduce(
+          tbb::blocked_range<std::size_t>(0, planned.size(), 16), Aabb(),
+          [&](const auto& r, Aabb acc) {
+            for (std::size_t j = r.begin(); j != r.end(); ++j) acc.extend(reach_of(planned[j].m, planned[j].pm, *planned[j].tool));
+            return acc;
+          },
+          [](Aabb a, const Aabb& b) {
+            a.extend(b);
+            return a;
+          });
+      roi.extend(got);
+      planned.clear();
+    };
+    stream_moves(opt.program, popt, iopt, [&](const motion::Move& m, const gcode::Block&) {
+      ++total_moves;
+      const PlannedMove pm = planner.plan(m);
+      planner.monitor(m, pm, mon);
+      planned.push_back({m, pm, &tool_for(m)});
+      if (planned.size() >= 256) measure();
     });
+    measure();
     res.axis_limit_violations = mon.violations();
     res.program_time_s = planner.time_s();
     amplitude_limits_of(mach, mon, res.amplitude_limits);
