@@ -464,14 +464,14 @@ SimResult simulate(const SimOptions& opt) {
   // thread busy where most scans are too small to share. (One at a time
   // when stopping at the first contact: the moves after it must not be
   // joined to it.)
-  struct Held {
+  struct Queued {
     motion::Move m;
     PlannedMove pm;
     const tool::Tool* tool;
     sweep::Sweep sw;
   };
   const std::size_t group_size = stop_at_contact ? 1 : std::max<std::size_t>(1, opt.check_group);
-  std::vector<Held> group;
+  std::vector<Queued> group;
   std::vector<InterferenceChecker::FirstScans> firsts;
   auto check_group = [&] {
     if (group.empty()) return;
