@@ -224,6 +224,15 @@ void block_target_distances(const stock::VoxelBlock& b, const Vec3& centre, doub
   // same order, so the nearest (the first of equally near) stays the same.
   thread_local std::array<std::vector<unsigned>, 64> enear;
   std::array<bool, 64> eighth_ready{};
+  auto eighth_near = [&](int x, int y, int z, std::size_t q) -> const std::vector<unsigned>& {
+    const std::size_t e = (q << 3) | static_cast<std::size_t>((((x >> 1) & 1) << 2) | (((y >> 1) & 1) << 1) | ((z >> 1) & 1));
+    if (!eighth_ready[e]) {
+      const Vec3 ce = b.first_center + h * Vec3((x & ~1) + 0.5, (y & ~1) + 0.5, (z & ~1) + 0.5);
+      target.triangles_near(ce, std::sqrt(3.0) * 0.5 * h + 1.5 * h, qnear[q], enear[e]);
+      eighth_ready[e] = true;
+    }
+    return enear[e];
+  };
   target.triangles_near(centre, reach + 1.5 * h, near);
   std::array<std::optional<double>, 8> dq;
   std::array<bool, 8> quarter_far{};
@@ -265,15 +274,8 @@ void block_target_distances(const stock::VoxelBlock& b, const Vec3& centre, doub
           dt[i] = dc < 0 ? -hf : hf;
         } else if ((p - centre_q[q]).squaredNorm() <= sat_q2[q]) {
           dt[i] = *dq[q] < 0 ? -hf : hf;
-        } else if (const auto d = quarter_far[q] ? std::nullopt : [&]() {
-                     const auto e = static_cast<std::size_t>((q << 3) | (((x >> 1) & 1) << 2) | (((y >> 1) & 1) << 1) | ((z >> 1) & 1));
-                     if (!eighth_ready[e]) {
-                       const Vec3 ce = b.first_center + h * Vec3((x & ~1) + 0.5, (y & ~1) + 0.5, (z & ~1) + 0.5);
-                       target.triangles_near(ce, std::sqrt(3.0) * 0.5 * h + 1.5 * h, qnear[q], enear[e]);
-                       eighth_ready[e] = true;
-                     }
-                     return target.signed_distance_if_within(p, 1.5 * h, enear[e]);
-                   }()) {
+        } else if (const auto d = quarter_far[q] ? std::nullopt
+                                                 : target.signed_distance_if_within(p, 1.5 * h, eighth_near(x, y, z, q))) {
           dt[i] = static_cast<float>(std::clamp(*d, -h, h));
         } else if (r2 <= h * h) {
           dt[i] = dc < 0 ? -hf : hf;  // the centre lies in this voxel's empty ball

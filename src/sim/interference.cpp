@@ -66,7 +66,7 @@ void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, con
     const double s = static_cast<double>(k) / n;
     const double s_prev = static_cast<double>(k - 1) / n;
     const Pose pose = planner_.pose_at(m, pm, s);
-    if (on_pose) on_pose();
+    on_pose();
     // Skip poses whose regions all miss the material's reach.
     bool any = false;
     std::vector<Aabb> boxes;
