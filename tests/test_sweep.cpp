@@ -501,8 +501,8 @@ TEST(Sweep, VToolPlaningPrismIsOneLipschitz) {
 // tools, moves sheared sideways and up or down, a tilted tool frame; pairs
 // near the prism, inside and out, and past its ends. Each part of the
 // bound is needed: the plane alone passes above the prism outside, the
-// plane within the length alone past its ends, and past an end the plane
-// without the end's drift (shear).
+// plane within the length alone past its ends, past an end the plane
+// without the end's drift (shear), and inside the way to the nearer end.
 TEST(Sweep, ProfilePrismLiesAboveItsSectionBound) {
   std::mt19937_64 rng(23);
   const Eigen::Matrix3d R = Eigen::AngleAxisd(0.5, Vec3(0.2, 1, 0.4).normalized()).toRotationMatrix();
@@ -518,7 +518,7 @@ TEST(Sweep, ProfilePrismLiesAboveItsSectionBound) {
       {"vtool:angle=90,h=0.05", Vec3(0.02, 0.005, -0.003), Eigen::Matrix3d::Identity()},
       {"vtool:angle=60,h=0.05", Vec3(0.03, -0.01, 0.01), R},
   };
-  int checked = 0, inside = 0, plane_above = 0, length_above = 0, past_used = 0, drift_needed = 0;
+  int checked = 0, inside = 0, plane_above = 0, length_above = 0, past_used = 0, drift_needed = 0, end_inside = 0;
   for (const Case& cs : cases) {
     const sweep::Sweep s = sweep::sweep_line(Vec3(0.01, -0.02, 0.03), Vec3(0.01, -0.02, 0.03) + cs.move, cs.frame,
                                              tool::parse_tool_spec(cs.spec, "test"));
@@ -544,6 +544,8 @@ TEST(Sweep, ProfilePrismLiesAboveItsSectionBound) {
       if (past > 0) {
         past_used += sp.f_min * (plane - past * sp.shear) > past + 1e-9;  // the section's term bounds it, not the way past
         drift_needed += dy < sp.f_min * plane - 1e-9;
+      } else {
+        end_inside += plane < past - 1e-9;  // the nearer end bounds it, not the plane
       }
       ++checked;
     }
@@ -554,6 +556,7 @@ TEST(Sweep, ProfilePrismLiesAboveItsSectionBound) {
   EXPECT_GT(length_above, 100);
   EXPECT_GT(past_used, 1000);
   EXPECT_GT(drift_needed, 100);
+  EXPECT_GT(end_inside, 1000);
   // Other pieces say no.
   const sweep::Sweep ball = sweep::sweep_line(Vec3(0, 0, 0), Vec3(1, 0, 0), Eigen::Matrix3d::Identity(),
                                               tool::parse_tool_spec("ball:d=1", "test"));

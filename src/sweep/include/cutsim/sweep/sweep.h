@@ -590,7 +590,9 @@ double distance_below(const Primitive& p, const Vec3& x, double lim);
 /// Within the prism's length its distance is A scaled by the lean of the
 /// nearest face, a factor in [f_min, 1] (f_min from the move's sideways
 /// part), or a larger term (the top's, the box's): so at least P where P
-/// < 0 and f_min P where P >= 0. Beyond its ends it is at least the way
+/// < 0 and f_min P where P >= 0; and inside, no deeper than the way to
+/// its nearer end (a voxel deep in a turn's sweep but near the end of one
+/// of its pieces). Beyond its ends it is at least the way
 /// past the end along the move, b; and its section there is the end's,
 /// which lies within b shear of the section drawn on (shear = |(d.y,
 /// d.z)| / |d.x|; A is 1-Lipschitz in the plane): so at least f_min (P -
@@ -637,9 +639,10 @@ struct SectionPlane {
 [[gnu::always_inline]] inline double section_bound(const SectionPlane& sp, const Vec3& y) {
   const double px = sp.px + sp.axis.dot(y);
   const double a = sp.c + sp.g.dot(y);
-  const double b = px < sp.lo ? sp.lo - px : px > sp.hi ? px - sp.hi : 0.0;  // past an end
+  // The way past the nearer end (negative within the length).
+  const double b = std::max(sp.lo - px, px - sp.hi);
   if (b > 0) return std::max(b, sp.f_min * (a - b * sp.shear));
-  return a >= 0 ? sp.f_min * a : a;
+  return a >= 0 ? sp.f_min * a : std::max(a, b);
 }
 
 inline double core_radius(const Primitive& p) {
