@@ -171,6 +171,20 @@ AxisReport analyze_axes(const std::string& program, const ProgramOptions& popt, 
   return r;
 }
 
+namespace {
+
+// A move planned, with its tool (and, once the cutting pass builds it,
+// its sweep), waiting for its group: both passes plan moves in order and
+// work on them side by side.
+struct QueuedMove {
+  motion::Move m;
+  PlannedMove pm;
+  const tool::Tool* tool;
+  sweep::Sweep sw;
+};
+
+}  // namespace
+
 SimResult simulate(const SimOptions& opt) {
   const auto t_start = Clock::now();
   SimResult res;
@@ -355,12 +369,7 @@ SimResult simulate(const SimOptions& opt) {
       }
       return out;
     };
-    struct Planned {
-      motion::Move m;
-      PlannedMove pm;
-      const tool::Tool* tool;
-    };
-    std::vector<Planned> planned;
+    std::vector<QueuedMove> planned;
     auto measure = [&] {
       const Aabb got = tbb::parallel_reduce(
           tbb::blocked_range<std::size_t>(0, planned.size(), 16), Aabb(),
@@ -379,7 +388,7 @@ SimResult simulate(const SimOptions& opt) {
       ++total_moves;
       const PlannedMove pm = planner.plan(m);
       planner.monitor(m, pm, mon);
-      planned.push_back({m, pm, &tool_for(m)});
+      planned.push_back({m, pm, &tool_for(m), {}});
       if (planned.size() >= 256) measure();
     });
     measure();
@@ -464,14 +473,8 @@ SimResult simulate(const SimOptions& opt) {
   // thread busy where most scans are too small to share. (One at a time
   // when stopping at the first contact: the moves after it must not be
   // joined to it.)
-  struct Queued {
-    motion::Move m;
-    PlannedMove pm;
-    const tool::Tool* tool;
-    sweep::Sweep sw;
-  };
   const std::size_t group_size = stop_at_contact ? 1 : std::max<std::size_t>(1, opt.check_group);
-  std::vector<Queued> group;
+  std::vector<QueuedMove> group;
   std::vector<InterferenceChecker::FirstScans> firsts;
   auto check_group = [&] {
     if (group.empty()) return;
