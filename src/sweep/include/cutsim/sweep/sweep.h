@@ -418,21 +418,19 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
 [[gnu::always_inline]] inline double prism_section(const tool::EdgeProfile& e, double sin_half, double cos_half,
                                                    const Vec3& d, const double (&f_side)[2], double f_top, double y,
                                                    double z) {
-  // tool::profile_distance_2d's two cases, with the factor worked into each.
-  const double a = std::fabs(y), b = z - e.nose_radius;
-  double af;
-  if (a * sin_half + b * cos_half <= 0) {
-    // Nearest to the nose's centre: the gradient (y, b) / r turns with the
-    // point. Its factor ax / hypot(ax, g . d), multiplied through by r:
-    // one division where normalising the gradient first took three.
-    const double r = hypot2(a, b);
-    const double ax = std::fabs(d.x());
-    const double f = r > 0 ? ax * r / hypot2(ax * r, y * d.y() + b * d.z()) : prism_factor(ax, -d.z());
-    af = (r - e.nose_radius) * f;
-  } else {
-    // A side face: its factor is the piece's, worked out once.
-    af = (a * cos_half - b * sin_half - e.nose_radius) * f_side[y < 0 ? 1 : 0];
-  }
+  // The profile's two cases, with the factor worked into each.
+  const double af = tool::profile_cases(
+      e, sin_half, cos_half, y, z,
+      [&](double r, double, double b) {
+        // Nearest to the nose's centre: the gradient (y, b) / r turns with
+        // the point. Its factor ax / hypot(ax, g . d), multiplied through
+        // by r: one division where normalising the gradient first took three.
+        const double ax = std::fabs(d.x());
+        const double f = r > 0 ? ax * r / hypot2(ax * r, y * d.y() + b * d.z()) : prism_factor(ax, -d.z());
+        return (r - e.nose_radius) * f;
+      },
+      // A side face: its factor is the piece's, worked out once.
+      [&](double r) { return (r - e.nose_radius) * f_side[y < 0 ? 1 : 0]; });
   return std::max(af, (z - e.height) * f_top);
 }
 

@@ -125,24 +125,36 @@ Aabb shape_bounds_below(const Shape& s, double top);
 /// Signed distance in the rake plane to the edge profile Q (no height cap):
 /// negative inside. Also gives the unit outward gradient (gy, gz).
 double profile_distance_2d(const EdgeProfile& e, double y, double z, double* gy = nullptr, double* gz = nullptr);
-/// The same, given sin and cos of the half angle (sb, cb): inline, for the
-/// stock update's V prisms, which take them from the piece.
+/// The edge profile's two cases at a point of the rake plane, each with
+/// the way r from the point to the profile before the nose radius is
+/// taken off (the signed distance is r - nose radius): `round(r, a, b)`
+/// where the point is nearest the nose's centre (a = |y|, b = z - nose
+/// radius, r = hypot(a, b)), else `side(r)` (r from the side face's line
+/// through that centre). Inline, given sin and cos of the half angle (sb,
+/// cb): the stock update's prisms fold their lean into each case.
+template <class Round, class Side>
+[[gnu::always_inline]] inline double profile_cases(const EdgeProfile& e, double sb, double cb, double y, double z,
+                                                   Round round, Side side) {
+  const double a = std::fabs(y), b = z - e.nose_radius;
+  if (a * sb + b * cb <= 0) return round(hypot2(a, b), a, b);
+  return side(a * cb - b * sb);
+}
+/// profile_distance_2d given sin and cos of the half angle (sb, cb):
+/// inline, for the flank body.
 [[gnu::always_inline]] inline double profile_distance_2d(const EdgeProfile& e, double sb, double cb, double y,
                                                          double z, double* gy, double* gz) {
-  const double a = std::fabs(y), b = z - e.nose_radius;
-  double d, ga, gb;
-  if (a * sb + b * cb <= 0) {  // nearest to the apex of the wedge
-    d = hypot2(a, b);
-    ga = d > 0 ? a / d : 0;
-    gb = d > 0 ? b / d : -1;
-  } else {
-    d = a * cb - b * sb;
-    ga = cb;
-    gb = -sb;
-  }
+  double ga = cb, gb = -sb;  // (a side face's)
+  const double r = profile_cases(
+      e, sb, cb, y, z,
+      [&](double r, double a, double b) {
+        ga = r > 0 ? a / r : 0;
+        gb = r > 0 ? b / r : -1;
+        return r;
+      },
+      [](double r) { return r; });
   if (gy) *gy = y < 0 ? -ga : ga;
   if (gz) *gz = gb;
-  return d - e.nose_radius;
+  return r - e.nose_radius;
 }
 
 /// A flank body's angles' sines and cosines (half angle, clearance, rake).
