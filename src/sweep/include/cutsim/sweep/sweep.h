@@ -643,6 +643,18 @@ struct SectionPlane {
   return a >= 0 ? sp.f_min * a : std::max(a, b);
 }
 
+/// section_bound's least over the cube of half width `w` around the plane's
+/// point (x + y, |y_i| <= w): with a and px at their extremes there, the
+/// way past the ends at its least, and where it is positive the least of
+/// max(b, f_min (a - b shear)) over b.
+[[gnu::always_inline]] inline double section_bound_over(const SectionPlane& sp, double w) {
+  const double a = sp.c - w * sp.g.cwiseAbs().sum();
+  const double e = w * sp.axis.cwiseAbs().sum();
+  const double b = std::max(sp.lo - (sp.px + e), (sp.px - e) - sp.hi);
+  const double inside = a >= 0 ? sp.f_min * a / (1 + sp.f_min * sp.shear) : a;
+  return b > 0 ? std::max(b, inside) : inside;
+}
+
 inline double core_radius(const Primitive& p) {
   if (const auto* hp = std::get_if<HullPrim>(&p)) return hp->radius;
   if (const auto* tp = std::get_if<TorusPrim>(&p)) return tp->torus.nose_radius;
