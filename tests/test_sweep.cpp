@@ -564,6 +564,52 @@ TEST(Sweep, ProfilePrismLiesAboveItsSectionBound) {
   EXPECT_FALSE(sweep::prism_section_plane(ball.prims.at(0), Vec3(0, 0, 0), &sp));
 }
 
+// The stock update passes a whole quarter over where the section bound's
+// least over the quarter clears its deepest voxel's bar: that least must
+// lie below the bound (and so the prism) at every voxel of the cube, and
+// it must not be idle: where the cube lies beside the prism it clears
+// zero, and past an end the way past bounds it.
+TEST(Sweep, SectionBoundOverACubeIsBelowItAtEveryVoxel) {
+  std::mt19937_64 rng(29);
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.7, Vec3(1, 0.3, -0.2).normalized()).toRotationMatrix();
+  const std::vector<std::pair<const char*, Vec3>> cases = {
+      {"vtool:angle=90,h=0.1", Vec3(0.002, 0, -0.0004)},
+      {"vtool:angle=60,h=0.05", Vec3(-0.003, 0.001, 0.001)},
+      {"nose:r=0.05,angle=60", Vec3(0.01, 0.003, 0.008)},
+  };
+  const double h = 0.0005, w = 1.5 * h;
+  int cubes = 0, positive = 0, past_end = 0;
+  for (const auto& [spec, move] : cases)
+    for (const Eigen::Matrix3d& frame : {Eigen::Matrix3d(Eigen::Matrix3d::Identity()), Eigen::Matrix3d(R)}) {
+      const sweep::Sweep s = sweep::sweep_line(Vec3(0, 0, 0), move, frame, tool::parse_tool_spec(spec, "test"));
+      ASSERT_EQ(s.prims.size(), 1u) << spec;
+      const auto& p = s.prims[0];
+      const Aabb b = sweep::bounds(p).expanded(0.004);
+      std::uniform_real_distribution<double> ux(b.min.x(), b.max.x()), uy(b.min.y(), b.max.y()), uz(b.min.z(), b.max.z());
+      for (int i = 0; i < 4000; ++i) {
+        const Vec3 c(ux(rng), uy(rng), uz(rng));
+        sweep::SectionPlane sp;
+        ASSERT_TRUE(sweep::prism_section_plane(p, c, &sp)) << spec;
+        const double least = sweep::section_bound_over(sp, w);
+        double lowest = std::numeric_limits<double>::infinity();
+        for (int q = 0; q < 64; ++q) {
+          const Vec3 y = h * Vec3((q >> 4) - 1.5, ((q >> 2) & 3) - 1.5, (q & 3) - 1.5);
+          const double at = sweep::section_bound(sp, y);
+          lowest = std::min(lowest, at);
+          EXPECT_GE(sweep::distance(p, c + y), least - 1e-12) << spec << " at " << (c + y).transpose();
+        }
+        EXPECT_LE(least, lowest + 1e-15) << spec << " at " << c.transpose();
+        positive += least > 0;
+        const double e = w * sp.axis.cwiseAbs().sum();
+        past_end += std::max(sp.lo - (sp.px + e), (sp.px - e) - sp.hi) > least - 1e-15 && least > 0;
+        ++cubes;
+      }
+    }
+  EXPECT_EQ(cubes, 24000);
+  EXPECT_GT(positive, 5000);
+  EXPECT_GT(past_end, 500);
+}
+
 TEST(Sweep, VToolPrismIsItsPlanesInsideAndTheExtrusionOfItsSectionOutside) {
   // A 60 deg V tool lowering by 1 in 8 along its cutting direction: the
   // piece is a prism whose sides lean by the motion. Inside, its distance
