@@ -58,6 +58,17 @@ Coord ceil_coord(const Vec3& v) {
                static_cast<int>(std::ceil(v.z())));
 }
 
+// A profile prism's section plane at `c` (sweep::prism_section_plane),
+// lowered by far more than the arithmetic's rounding (a voxel is 1e-4 mm
+// or more); false for other pieces.
+bool lowered_section_plane(const sweep::Primitive& p, const Vec3& c, sweep::SectionPlane* sec) {
+  if (!sweep::prism_section_plane(p, c, sec)) return false;
+  sec->c -= 1e-12;
+  sec->lo -= 1e-12;
+  sec->hi += 1e-12;
+  return true;
+}
+
 // Smallest value of a leaf's 512 (x-major) values. Lanes of 8 kept apart
 // and `a < b ? a : b` (what a vector min does) let the compiler vectorise;
 // one running std::min is a serial chain of 511 compares.
@@ -1183,19 +1194,13 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
             const Aabb& box0 = cbox[k0];
             const bool inner = sweep::interior_only(p0);
             bool bounded = true;
-            // A profile prism's section plane at the centre (lowered by far
-            // more than the arithmetic's rounding): over the whole quarter,
-            // then at each voxel. (A fifth of the snowflake's voxels the
-            // key left were passed over by it, a quarter of its one-piece
-            // quarters changed no voxel.)
+            // A profile prism's section plane at the centre: over the whole
+            // quarter, then at each voxel. (A fifth of the snowflake's
+            // voxels the key left were passed over by it; a quarter of its
+            // one-piece quarters changed no voxel.)
             sweep::SectionPlane sec;
-            const bool sectioned = !seeded && !inner && sweep::prism_section_plane(p0, cb, &sec);
-            if (sectioned) {
-              sec.c -= 1e-12;
-              sec.lo -= 1e-12;
-              sec.hi += 1e-12;
-              if (sweep::section_bound_over(sec, hq) >= need_max) continue;
-            }
+            const bool sectioned = !seeded && !inner && lowered_section_plane(p0, cb, &sec);
+            if (sectioned && sweep::section_bound_over(sec, hq) >= need_max) continue;
             material_voxels(bx, by, bz, [&](int idx, int q, float v, const Vec3& p) {
               const double need = inner ? std::min(-static_cast<double>(v), 0.0) : -static_cast<double>(v);
               if (key0 - quarter_off[q] >= need) return;
@@ -1354,15 +1359,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
               n.plane = true;
               n.c = seed_d[k];
               n.grad = cgrad[k];
-            } else if (sweep::prism_section_plane(*cand[k], cb, &n.sec)) {
+            } else if (lowered_section_plane(*cand[k], cb, &n.sec)) {
               // A round nose's or a sideways prism's section plane (a voxel
               // inside several, as a slow tool servo's turns overlap, then
-              // takes only those it leaves below the deepest so far), lowered
-              // by far more than the arithmetic's rounding.
+              // takes only those it leaves below the deepest so far).
               n.section = true;
-              n.sec.c -= 1e-12;
-              n.sec.lo -= 1e-12;
-              n.sec.hi += 1e-12;
               n.c = n.sec.c;
             }
           }
