@@ -416,6 +416,52 @@ TEST(Interference, DeepestPointIsTheSameWhateverTheThreads) {
   }
 }
 
+TEST(Interference, DeepestOverlapIsFoundInTheLastBlocksListed) {
+  // The blocks are scanned in chunks as they are listed, each chunk from
+  // the deepest depth found before it. A shallow slab, tilted so that it
+  // reaches deeper along x and cut off at x = 1.5, lies across the top of
+  // the block, shallower than the material under it: its overlap with the
+  // material is deepest in the last of the some 500 blocks listed (x runs
+  // slowest), below the band, so no chunk stops the listing. The answer must be the deepest over every
+  // voxel, found by brute force.
+  const Aabb box{Vec3(0, 0, -1), Vec3(2, 2, 0)};
+  stock::StockOptions so;
+  so.voxel_mm = 0.01;
+  const stock::Stock s(box, box, so);
+  const double h = so.voxel_mm, g = s.band_mm();
+  const Vec3 n = Vec3(0.002, 0, 1).normalized();
+  auto sd = [&](const Vec3& x) {
+    const double t = n.dot(x);
+    return std::max(std::max(t - 0.5, -0.016 - t), x.x() - 1.5);
+  };
+  stock::Overlap one;
+  tbb::task_arena(1).execute([&] { one = s.overlap(box, sd, nullptr, 0.0); });
+  double deepest = 0;
+  const Vec3 o = s.roi_lattice_origin();
+  int voxels = 0;
+  for (int i = 0; o.x() + i * h < 2; ++i)
+    for (int j = 0; o.y() + j * h < 2; ++j)
+      for (int k = 0; o.z() + k * h < 0.01; ++k) {
+        const Vec3 p = o + h * Vec3(i, j, k);
+        if (p.z() < -0.05) continue;
+        deepest = std::max(deepest, std::min(-sd(p), -s.sample(p)));
+        ++voxels;
+      }
+  ASSERT_GT(voxels, 100000);
+  ASSERT_GT(deepest, 0.008);
+  ASSERT_LT(deepest, 0.9 * g);  // not saturated: every block is scanned
+  EXPECT_FALSE(one.at_least);
+  EXPECT_NEAR(one.depth_mm, deepest, 1e-9);
+  EXPECT_GT(one.where.x(), 1.4);
+  EXPECT_NEAR(std::min(-sd(one.where), -s.sample(one.where)), one.depth_mm, 1e-9);
+  for (int rep = 0; rep < 10; ++rep) {
+    stock::Overlap two;
+    tbb::task_arena(2).execute([&] { two = s.overlap(box, sd, nullptr, 0.0); });
+    EXPECT_EQ(two.depth_mm, one.depth_mm);
+    EXPECT_EQ(two.where, one.where);
+  }
+}
+
 TEST(Interference, SaturatedDepthsThatDifferInTheLastDigitsTie) {
   // As on the snowflake: the saturated depths differ from voxel to voxel in
   // the 7th digit (material a hair shallower than the band). Past the cap

@@ -1611,35 +1611,11 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   constexpr double kPlaneMargin = 1e-12;  // mm
   const bool plane = static_cast<bool>(region_plane);
   const auto& tree = m.grid->tree();
-  // Blocks the region can reach (its distance is a lower bound outside),
-  // skipping air tiles; with the region's distance at their centre.
-  // Air is tested first, on the 128^3 node that holds the leaf (most of a
-  // tool's body is over air that earlier cuts left).
   using Node1T = openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType;
+  // The blocks listed and not yet scanned, and the place of the first of
+  // them in the listing's order.
   std::vector<std::pair<Coord, double>> blocks;
-  const Node1T* node = nullptr;
-  Coord node_origin(std::numeric_limits<int>::max());
-  bool node_air = false;
-  for_each_leaf_block(m.origin, m.h, bb,
-                      [&](const Vec3& c, double hd, const Coord& bo, int dim) {
-                        return (dim != kMid || m.may_hold_material(bo)) &&
-                               (dim != kNode1Dim || m.node_may_hold_material(bo)) && region(c) <= hd - min_depth_mm;
-                      },
-                      [&](const Coord& o) {
-                        const Coord n1(o.x() & ~(kNode1Dim - 1), o.y() & ~(kNode1Dim - 1), o.z() & ~(kNode1Dim - 1));
-                        if (n1 != node_origin) {
-                          node_origin = n1;
-                          node = tree.probeConstNode<Node1T>(n1);
-                          node_air = !node && tree.getValue(n1) > 0;
-                        }
-                        if (node_air) return;
-                        if (node && !node->probeConstLeaf(o) && node->getValue(o) > 0) return;  // air tile
-                        const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
-                        const double rc = region(c0);
-                        if (rc > hd0 - min_depth_mm) return;
-                        blocks.emplace_back(o, rc);
-                      });
-  if (blocks.empty()) return best;
+  std::size_t base = 0;
   std::mutex mu;
   // The result must not depend on how the threads share the blocks: of
   // equal depths the first block (in their fixed order) wins, and once a
@@ -1650,17 +1626,18 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   // The region's distance is 1-Lipschitz, so its depth at a voxel is at
   // most the centre's depth plus the voxel's offset: voxels (and blocks)
   // whose material or region depth cannot beat the deepest overlap found
-  // so far are passed over without evaluating the region.
-  auto scan = [&](std::size_t i0, std::size_t i1) {
+  // so far (in this chunk or the ones before it) are passed over without
+  // evaluating the region.
+  auto scan = [&](std::size_t i0, std::size_t i1, double floor0) {
     Overlap local;
     std::size_t local_block = 0;
-    for (std::size_t i = i0; i != i1 && i < first_saturated.load(std::memory_order_relaxed); ++i) {
+    for (std::size_t i = i0; i != i1 && base + i < first_saturated.load(std::memory_order_relaxed); ++i) {
       const Coord o = blocks[i].first;
       const double rc = blocks[i].second;
       const LeafT* leaf = tree.probeConstLeaf(o);
       const float* data = leaf ? leaf->buffer().data() : nullptr;
       const float tile = leaf ? 0.0f : tree.getValue(o);
-      double floor = std::max(min_depth_mm, local.depth_mm);
+      double floor = std::max(floor0, local.depth_mm);
       if (-rc + hd0 <= floor) continue;
       if (!data && -static_cast<double>(tile) <= floor) continue;
       const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
@@ -1728,14 +1705,14 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
                     local.where = p;
                     local.stock_value = data ? static_cast<double>(data[((x - o.x()) << 6) | ((y - o.y()) << 3) | (z - o.z())])
                                              : static_cast<double>(tile);
-                    local_block = i;
+                    local_block = base + i;
                     floor = depth;
                   }
                 }
           }
       if (local.depth_mm >= cap) {
         std::size_t f = first_saturated.load();
-        while (i < f && !first_saturated.compare_exchange_weak(f, i)) {
+        while (base + i < f && !first_saturated.compare_exchange_weak(f, base + i)) {
         }
         break;
       }
@@ -1748,12 +1725,54 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
       }
     }
   };
-  // Few blocks (the common case: one pose of a small region) are not worth
-  // the threads' start-up.
-  if (blocks.size() <= 16) scan(0, blocks.size());
-  else
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size()),
-                      [&](const auto& r) { scan(r.begin(), r.end()); });
+  // The blocks are scanned in chunks as they are listed, so that the
+  // listing stops at the first chunk that saturates (the blocks after
+  // that one would not be scanned). A chunk starts from the deepest depth
+  // found before it: a later block's voxel no deeper could not win (the
+  // first block wins a tie). Few blocks (one pose of a small region) are
+  // not worth the threads' start-up.
+  std::size_t chunk = 64;
+  bool stop = false;
+  auto scan_chunk = [&] {
+    const double floor0 = std::max(min_depth_mm, best.depth_mm);
+    if (blocks.size() <= 16) scan(0, blocks.size(), floor0);
+    else
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size()),
+                        [&](const auto& r) { scan(r.begin(), r.end(), floor0); });
+    base += blocks.size();
+    blocks.clear();
+    stop = first_saturated.load() != std::numeric_limits<std::size_t>::max();
+    chunk = std::min<std::size_t>(2 * chunk, 1 << 14);
+  };
+  // Blocks the region can reach (its distance is a lower bound outside),
+  // skipping air tiles; with the region's distance at their centre.
+  // Air is tested first, on the 128^3 node that holds the leaf (most of a
+  // tool's body is over air that earlier cuts left).
+  const Node1T* node = nullptr;
+  Coord node_origin(std::numeric_limits<int>::max());
+  bool node_air = false;
+  for_each_leaf_block(m.origin, m.h, bb,
+                      [&](const Vec3& c, double hd, const Coord& bo, int dim) {
+                        return !stop && (dim != kMid || m.may_hold_material(bo)) &&
+                               (dim != kNode1Dim || m.node_may_hold_material(bo)) && region(c) <= hd - min_depth_mm;
+                      },
+                      [&](const Coord& o) {
+                        if (stop) return;
+                        const Coord n1(o.x() & ~(kNode1Dim - 1), o.y() & ~(kNode1Dim - 1), o.z() & ~(kNode1Dim - 1));
+                        if (n1 != node_origin) {
+                          node_origin = n1;
+                          node = tree.probeConstNode<Node1T>(n1);
+                          node_air = !node && tree.getValue(n1) > 0;
+                        }
+                        if (node_air) return;
+                        if (node && !node->probeConstLeaf(o) && node->getValue(o) > 0) return;  // air tile
+                        const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
+                        const double rc = region(c0);
+                        if (rc > hd0 - min_depth_mm) return;
+                        blocks.emplace_back(o, rc);
+                        if (blocks.size() >= chunk) scan_chunk();
+                      });
+  if (!blocks.empty() && !stop) scan_chunk();
   best.at_least = best.depth_mm >= cap;
   return best;
 }
