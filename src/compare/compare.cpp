@@ -24,6 +24,11 @@ Vec3 block_centre(const stock::VoxelBlock& b, double h) {
 
 double fraction(double d, double h) { return std::clamp(0.5 - d / h, 0.0, 1.0); }
 
+// Stock value `s` and target distance `t` both material, or both air, at
+// least h deep: the voxel adds nothing to either volume, and both regions'
+// level sets keep their fill (+h) there.
+bool agree_beyond_h(double s, double t, double h) { return (s <= -h && t <= -h) || (s >= h && t >= h); }
+
 // A region's level set over the blocks where it exists, clamped to +-h and
 // kept in 8 bits (it is only drawn; the volumes are summed before), on
 // cells of 2^shift voxels: a cell keeps the least of its voxels' values, so
@@ -277,14 +282,14 @@ void block_target_distances(const stock::VoxelBlock& b, const Vec3& centre, doub
         const double pz = b.first_center.z() + h * z;
         const double cx = px - centre.x(), cy = py - centre.y(), cz = pz - centre.z();
         const double r2 = cx * cx + cy * cy + cz * cz;
-        const Vec3 p(px, py, pz);
         if (r2 <= sat_c2) {
           dt[i] = dc < 0 ? -hf : hf;
         } else if (const double qx = px - centre_q[q].x(), qy = py - centre_q[q].y(), qz = pz - centre_q[q].z();
                    qx * qx + qy * qy + qz * qz <= sat_q2[q]) {
           dt[i] = *dq[q] < 0 ? -hf : hf;
         } else if (const auto d = quarter_far[q] ? std::nullopt
-                                                 : target.signed_distance_if_within(p, 1.5 * h, eighth_near(x, y, z, q))) {
+                                                 : target.signed_distance_if_within(Vec3(px, py, pz), 1.5 * h,
+                                                                                   eighth_near(x, y, z, q))) {
           dt[i] = static_cast<float>(std::clamp(*d, -h, h));
         } else if (r2 <= h * h) {
           dt[i] = dc < 0 ? -hf : hf;  // the centre lies in this voxel's empty ball
@@ -365,7 +370,7 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
         for (int z = 0; z < b.n[2]; ++z) {
           const int i = (x * 8 + y) * 8 + z;
           const double sv = b.uniform ? b.value : b.values[i], tv = dt[i];
-          if ((sv <= -h && tv <= -h) || (sv >= h && tv >= h)) continue;  // both full, or both empty: 0
+          if (agree_beyond_h(sv, tv, h)) continue;
           const double fs = fraction(sv, h);
           const double ft = fraction(tv, h);
           over += std::max(0.0, ft - fs);
@@ -386,9 +391,7 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
         for (int z = 0; z < b.n[2]; ++z) {
           const int i = (x * 8 + y) * 8 + z;
           const double cs = std::clamp<double>(b.uniform ? b.value : b.values[i], -h, h);
-          // Stock and target both material, or both air, at least h deep:
-          // both regions' values are +h there (127, the fill).
-          if ((cs <= -h && dt[i] <= -h) || (cs >= h && dt[i] >= h)) continue;
+          if (agree_beyond_h(cs, dt[i], h)) continue;  // (both regions' values 127, the fill)
           const auto c = static_cast<std::size_t>(
               (ro.cell(ro.origin.x() + x, 0) * s + ro.cell(ro.origin.y() + y, 1)) * s + ro.cell(ro.origin.z() + z, 2));
           ro.v[c] = std::min(ro.v[c], quantize(std::max<double>(dt[i], -cs), h));

@@ -1640,6 +1640,11 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
       double floor = std::max(floor0, local.depth_mm);
       if (-rc + hd0 <= floor) continue;
       if (!data && -static_cast<double>(tile) <= floor) continue;
+      // (Every quarter's centre is 2 sqrt(3) h from the block's, so the
+      // cone from there reaches a quarter's voxels within hd0: the test
+      // above again, per quarter against the floor as it has risen since,
+      // with a hair of slack for the rounding of that sum.)
+      const double block_reach = -rc + hd0 * (1 + 1e-12);
       CoordBBox part = CoordBBox::createCube(o, kLeafDim);
       part.intersect(bb);
       // Per 4^3 quarter: its deepest material, then the region at its
@@ -1651,11 +1656,7 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
             CoordBBox qb = CoordBBox::createCube(q0, 4);
             qb.intersect(part);
             if (qb.empty()) continue;
-            // (Every quarter's centre is 2 sqrt(3) h from the block's, so
-            // the cone from there reaches its voxels within hd0: the block's
-            // test again, against the floor as it has risen since, with a
-            // hair of slack for the rounding of that sum.)
-            if (-rc + hd0 * (1 + 1e-12) <= floor) continue;
+            if (block_reach <= floor) continue;
             const Vec3 cq = m.origin + m.h * (Vec3(q0.x(), q0.y(), q0.z()).array() + 1.5).matrix();
             if (data) {
               // The whole 4^3 quarter (voxels outside `bb` only make the
