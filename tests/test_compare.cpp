@@ -1,5 +1,6 @@
 // Comparison with the target: overcut and undercut against closed forms,
 // their positions, a mesh with a hole refused, the coloured glb read back.
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -225,6 +226,46 @@ TEST(Compare, NearTrianglesAnswerAsTheWholeMesh) {
   EXPECT_GT(found, 10000u);
   EXPECT_GT(smaller, found / 2) << "a smaller ball inside should keep fewer triangles";
   EXPECT_LT(largest, all / 10) << "the near set should be a small part of the mesh";
+}
+
+// Where every triangle near a ball lies in one plane (the slotted block's
+// top, slot floor, walls), the comparison takes the plane's distance for
+// the surface's within the ball: clamped to the ball's edge, they must
+// agree; near an edge of the slot the triangles are not coplanar.
+TEST(Compare, FlatStretchesTakeThePlaneDistance) {
+  const compare::Target target(slotted_block());
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<unsigned> near;
+  int planar = 0, not_planar = 0, checked = 0;
+  for (int k = 0; k < 4000; ++k) {
+    const Vec3 c(0.5 + 5 * u(rng), -2.2 + 4.4 * u(rng), -0.3 + 0.5 * u(rng));
+    const double big = 0.01 + 0.4 * u(rng);
+    target.triangles_near(c, big, near);
+    const auto plane = target.common_plane(near);
+    if (near.empty()) {
+      ASSERT_FALSE(plane);
+      continue;
+    }
+    if (!plane) {
+      ++not_planar;
+      continue;
+    }
+    ++planar;
+    ASSERT_NEAR(plane->n.norm(), 1.0, 1e-12);
+    for (int i = 0; i < 20; ++i) {
+      Vec3 d(u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5);
+      const Vec3 p = c + d.normalized() * big * u(rng);
+      const double rho = big - (p - c).norm();
+      const double want = std::clamp(target.signed_distance(p), -rho, rho);
+      const double got = std::clamp(plane->signed_distance(p), -rho, rho);
+      ASSERT_NEAR(got, want, 1e-12) << "at (" << p.transpose() << "), ball (" << c.transpose() << ") " << big;
+      ++checked;
+    }
+  }
+  EXPECT_GT(planar, 500);
+  EXPECT_GT(not_planar, 500);
+  EXPECT_GT(checked, 10000);
 }
 
 TEST(Compare, CoarseRegionMeshesKeepTheVolumesAndCoverTheFineRegion) {

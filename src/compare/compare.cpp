@@ -239,6 +239,17 @@ void block_target_distances(const stock::VoxelBlock& b, const Vec3& centre, doub
     return enear[e];
   };
   target.triangles_near(centre, reach + 1.5 * h, near);
+  // A flat stretch of the target (the snowflake's top and its pocket's
+  // floor): every voxel lies at least 1.5h inside the ball `near` covers,
+  // so the plane's distance clamped to +-h is the surface's.
+  if (const auto plane = target.common_plane(near)) {
+    for (int x = 0; x < b.n[0]; ++x)
+      for (int y = 0; y < b.n[1]; ++y)
+        for (int z = 0; z < b.n[2]; ++z)
+          dt[(x * 8 + y) * 8 + z] =
+              static_cast<float>(std::clamp(plane->signed_distance(b.first_center + h * Vec3(x, y, z)), -h, h));
+    return;
+  }
   std::array<std::optional<double>, 8> dq;
   std::array<bool, 8> quarter_far{};
   for (int q = 0; q < 8; ++q) {
@@ -444,6 +455,7 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
     std::vector<unsigned> kept;
     Vec3 kept_c = Vec3::Zero();
     double kept_r = -1;
+    std::optional<Target::Plane> kept_plane;
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const Vec3& p = machined.positions[i];
       double d;
@@ -458,9 +470,16 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
           kept_c = p;
           kept_r = radius + 6 * h;
           target.triangles_near(kept_c, kept_r, kept);
+          kept_plane = target.common_plane(kept);
         }
-        const auto near = target.signed_distance_if_within(p, radius, kept);
-        d = near ? *near : target.signed_distance(p);
+        // The ball of `radius` around p lies in the kept one and holds
+        // the surface: on a flat stretch, the plane's distance is it.
+        if (kept_plane) {
+          d = kept_plane->signed_distance(p);
+        } else {
+          const auto near = target.signed_distance_if_within(p, radius, kept);
+          d = near ? *near : target.signed_distance(p);
+        }
         }
       }
       r.vertex_deviation_mm[i] = static_cast<float>(d);

@@ -305,6 +305,26 @@ std::optional<double> Target::signed_distance_if_within(const Vec3& p, double ra
   return std::nullopt;
 }
 
+std::optional<Target::Plane> Target::common_plane(const std::vector<unsigned>& near) const {
+  const Impl& m = *impl_;
+  constexpr double kFlat = 1e-9;           // mm off the plane
+  constexpr double kParallel = 1 - 1e-12;  // cosine between face normals
+  Vec3 n = Vec3::Zero();
+  for (const unsigned f : near)
+    if (m.face_n[f] != Vec3::Zero()) {
+      n = m.face_n[f];
+      break;
+    }
+  if (n == Vec3::Zero()) return std::nullopt;  // (and when `near` is empty)
+  const double c = n.dot(m.mesh.positions[m.mesh.triangles[near.front()][0]]);
+  for (const unsigned f : near) {
+    if (m.face_n[f] != Vec3::Zero() && m.face_n[f].dot(n) < kParallel) return std::nullopt;
+    for (const auto v : m.mesh.triangles[f])
+      if (std::fabs(n.dot(m.mesh.positions[v]) - c) > kFlat) return std::nullopt;
+  }
+  return Plane{n, c};
+}
+
 bool Target::inside(const Vec3& p) const { return impl_->inside_by_ray(p); }
 
 void Target::debug_closest(const Vec3& p, unsigned* prim, int* feature, Vec3* closest) const {

@@ -37,6 +37,21 @@ public:
   /// that holds the query's), without a search of the whole mesh.
   std::optional<double> signed_distance_if_within(const Vec3& p, double radius,
                                                   const std::vector<unsigned>& near) const;
+  /// A plane: the points x with n . x = c, n unit and pointing out of the material.
+  struct Plane {
+    Vec3 n;
+    double c = 0;
+    double signed_distance(const Vec3& p) const { return n.dot(p) - c; }
+  };
+  /// The plane `near` lies in, when every one of its triangles lies in one
+  /// plane (within 1e-9 mm) facing one way; nothing when `near` is empty.
+  /// If `near` holds every triangle within R of a point c, the surface
+  /// within R of c is that plane's disc (the mesh is closed: an edge of the
+  /// flat patch inside the ball would be shared with a triangle out of the
+  /// plane, itself within R), and the two half balls lie wholly outside and
+  /// inside. So at a point p within R of c, the signed distance clamped to
+  /// +-(R - |p - c|) is the plane's signed distance clamped alike.
+  std::optional<Plane> common_plane(const std::vector<unsigned>& near) const;
   /// Inside by ray parity (a cross-check for tests; not robust on edges).
   bool inside(const Vec3& p) const;
   /// For diagnosis: the closest triangle, its feature and point.
