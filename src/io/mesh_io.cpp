@@ -5,7 +5,6 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
-#include <map>
 #include <sstream>
 #include <unordered_map>
 
@@ -35,10 +34,29 @@ std::string read_all(const std::string& path) {
 // Builds an indexed mesh, merging vertices with identical coordinates.
 struct Builder {
   TriMesh m;
-  std::map<std::array<double, 3>, std::uint32_t> index;
+  // Equal coordinates (as ==: 0 and -0 are one) are one vertex, the first
+  // place it was given.
+  struct Key {
+    double x, y, z;
+    bool operator==(const Key& o) const { return x == o.x && y == o.y && z == o.z; }
+  };
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      auto bits = [](double v) {
+        std::uint64_t u;
+        v = v == 0 ? 0.0 : v;  // -0 hashes as 0
+        std::memcpy(&u, &v, 8);
+        return u;
+      };
+      std::uint64_t h = bits(k.x) * 0x9E3779B97F4A7C15ull;
+      h = (h ^ (h >> 29) ^ bits(k.y)) * 0xBF58476D1CE4E5B9ull;
+      h = (h ^ (h >> 32) ^ bits(k.z)) * 0x94D049BB133111EBull;
+      return static_cast<std::size_t>(h ^ (h >> 31));
+    }
+  };
+  std::unordered_map<Key, std::uint32_t, KeyHash> index;
   std::uint32_t vertex(const Vec3& p) {
-    const std::array<double, 3> k{p.x(), p.y(), p.z()};
-    auto [it, fresh] = index.emplace(k, static_cast<std::uint32_t>(m.positions.size()));
+    auto [it, fresh] = index.emplace(Key{p.x(), p.y(), p.z()}, static_cast<std::uint32_t>(m.positions.size()));
     if (fresh) m.positions.push_back(p);
     return it->second;
   }
@@ -188,25 +206,35 @@ TriMesh load_ply(const std::string& path, const std::string& data) {
     bad(path, line_no, "the header announces more vertices or faces than the file holds");
   Builder b;
   std::vector<std::uint32_t> ids(nv);
-  auto size_of = [&](const std::string& t) -> std::size_t {
-    if (t == "char" || t == "uchar" || t == "int8" || t == "uint8") return 1;
-    if (t == "short" || t == "ushort" || t == "int16" || t == "uint16") return 2;
-    if (t == "int" || t == "uint" || t == "float" || t == "int32" || t == "uint32" || t == "float32") return 4;
-    if (t == "double" || t == "float64") return 8;
+  // Each property's type, looked up once (not by name per value).
+  enum class Bin { u8, i8, u16, i16, u32, i32, f32, f64 };
+  auto code_of = [&](const std::string& t) -> Bin {
+    if (t == "uchar" || t == "uint8") return Bin::u8;
+    if (t == "char" || t == "int8") return Bin::i8;
+    if (t == "ushort" || t == "uint16") return Bin::u16;
+    if (t == "short" || t == "int16") return Bin::i16;
+    if (t == "uint" || t == "uint32") return Bin::u32;
+    if (t == "int" || t == "int32") return Bin::i32;
+    if (t == "float" || t == "float32") return Bin::f32;
+    if (t == "double" || t == "float64") return Bin::f64;
     bad(path, 0, "unknown PLY type '" + t + "'");
   };
-  auto read_bin = [&](const std::string& t, std::size_t& pos) -> double {
-    const std::size_t n = size_of(t);
+  auto read_bin = [&](Bin t, std::size_t& pos) -> double {
+    static constexpr std::size_t kSize[] = {1, 1, 2, 2, 4, 4, 4, 8};
+    const std::size_t n = kSize[static_cast<int>(t)];
     if (pos + n > data.size()) bad(path, 0, "PLY binary data ends early");
     const char* p = data.data() + pos;
     pos += n;
-    if (t == "float" || t == "float32") { float f; std::memcpy(&f, p, 4); return f; }
-    if (t == "double" || t == "float64") { double d; std::memcpy(&d, p, 8); return d; }
-    if (t == "uchar" || t == "uint8") return static_cast<unsigned char>(*p);
-    if (t == "char" || t == "int8") return static_cast<signed char>(*p);
-    if (t == "ushort" || t == "uint16") { std::uint16_t v; std::memcpy(&v, p, 2); return v; }
-    if (t == "short" || t == "int16") { std::int16_t v; std::memcpy(&v, p, 2); return v; }
-    if (t == "uint" || t == "uint32") { std::uint32_t v; std::memcpy(&v, p, 4); return v; }
+    switch (t) {
+      case Bin::f32: { float f; std::memcpy(&f, p, 4); return f; }
+      case Bin::f64: { double d; std::memcpy(&d, p, 8); return d; }
+      case Bin::u8: return static_cast<unsigned char>(*p);
+      case Bin::i8: return static_cast<signed char>(*p);
+      case Bin::u16: { std::uint16_t v; std::memcpy(&v, p, 2); return v; }
+      case Bin::i16: { std::int16_t v; std::memcpy(&v, p, 2); return v; }
+      case Bin::u32: { std::uint32_t v; std::memcpy(&v, p, 4); return v; }
+      case Bin::i32: break;
+    }
     std::int32_t v; std::memcpy(&v, p, 4); return v;
   };
   if (format == "ascii") {
@@ -237,20 +265,27 @@ TriMesh load_ply(const std::string& path, const std::string& data) {
     }
   } else {
     std::size_t pos = static_cast<std::size_t>(in.tellg());
+    std::vector<Bin> vtypes;
+    for (const auto& pr : vprops) vtypes.push_back(code_of(pr.first));
+    const Bin count_type = nf ? code_of(list_count_type) : Bin::u8, index_type = nf ? code_of(list_index_type) : Bin::u8;
+    b.index.reserve(nv);
+    b.m.positions.reserve(nv);
+    b.m.triangles.reserve(nf);
+    std::vector<double> vals(vprops.size());
+    std::vector<std::uint32_t> poly;
     for (std::size_t i = 0; i < nv; ++i) {
-      std::vector<double> vals(vprops.size());
-      for (std::size_t k = 0; k < vprops.size(); ++k) vals[k] = read_bin(vprops[k].first, pos);
+      for (std::size_t k = 0; k < vprops.size(); ++k) vals[k] = read_bin(vtypes[k], pos);
       ids[i] = b.vertex(Vec3(finite_or_fail(vals[static_cast<std::size_t>(ix)], path, 0),
                              finite_or_fail(vals[static_cast<std::size_t>(iy)], path, 0),
                              finite_or_fail(vals[static_cast<std::size_t>(iz)], path, 0)));
     }
     for (std::size_t f = 0; f < nf; ++f) {
-      const double nd = read_bin(list_count_type, pos);
+      const double nd = read_bin(count_type, pos);
       if (nd < 3 || nd > 1e6) bad(path, 0, "a face needs three vertices");
       const std::size_t n = static_cast<std::size_t>(nd);
-      std::vector<std::uint32_t> poly(n);
+      poly.resize(n);
       for (auto& v : poly) {
-        const double k = read_bin(list_index_type, pos);
+        const double k = read_bin(index_type, pos);
         if (k < 0 || k >= static_cast<double>(nv)) bad(path, 0, "face index out of range");
         v = ids[static_cast<std::size_t>(k)];
       }
