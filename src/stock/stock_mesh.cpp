@@ -148,7 +148,7 @@ TriMesh Stock::surface_mesh(double adaptivity) const {
         const int o[3] = {static_cast<int>(std::floor(a[0])) - base.x(), static_cast<int>(std::floor(a[1])) - base.y(),
                           static_cast<int>(std::floor(a[2])) - base.z()};
         if (o[0] < 0 || o[0] > 1 || o[1] < 0 || o[1] > 1 || o[2] < 0 || o[2] > 1)
-          return openvdb::tools::BoxSampler::sample(acc, a);  // (not reached: rounding can only keep it inside)
+          return openvdb::tools::BoxSampler::sample(acc, a);  // (rounding put the sample past the 3^3 voxels)
         float d[2][2][2];
         for (int x = 0; x < 2; ++x)
           for (int y = 0; y < 2; ++y)
