@@ -1,9 +1,9 @@
 #include "cutsim/compare/target.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
-#include <unordered_map>
 
 #include <embree3/rtcore.h>
 
@@ -200,7 +200,10 @@ Target::Target(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
   m.origin = m.box.center();
   m.volume = m.mesh.signed_volume();
   const std::size_t nf = m.mesh.triangles.size(), nv = m.mesh.positions.size();
-  std::unordered_map<std::uint64_t, Vec3> edge_n;  // sum of the two face normals, by edge
+  // Every (edge, face * 3 + k), sorted: an edge's faces are one run, in
+  // face order.
+  std::vector<std::pair<std::uint64_t, std::size_t>> edge_uses;
+  edge_uses.reserve(3 * nf);
   m.face_n.resize(nf);
   m.face_box.reserve(nf);
   m.vertex_n.assign(nv, Vec3::Zero());
@@ -216,16 +219,18 @@ Target::Target(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
       const Vec3 e1 = (*v[(k + 1) % 3] - *v[k]).normalized(), e2 = (*v[(k + 2) % 3] - *v[k]).normalized();
       const double ang = std::acos(std::clamp(e1.dot(e2), -1.0, 1.0));
       m.vertex_n[t[static_cast<std::size_t>(k)]] += ang * m.face_n[f];
-      // try_emplace with an explicit zero: Eigen's default constructor leaves
-      // the coefficients uninitialised, so operator[] would add to garbage.
-      const auto key = Impl::edge_key(t[static_cast<std::size_t>(k)], t[static_cast<std::size_t>((k + 1) % 3)]);
-      edge_n.try_emplace(key, Vec3::Zero()).first->second += m.face_n[f];
+      edge_uses.emplace_back(Impl::edge_key(t[static_cast<std::size_t>(k)], t[static_cast<std::size_t>((k + 1) % 3)]),
+                             3 * f + static_cast<std::size_t>(k));
     }
   }
+  // An edge's pseudonormal: the sum of its faces' normals, added in face order.
+  std::sort(edge_uses.begin(), edge_uses.end());
   m.face_edge_n.resize(nf);
-  for (std::size_t f = 0; f < nf; ++f) {
-    const auto& t = m.mesh.triangles[f];
-    for (std::size_t k = 0; k < 3; ++k) m.face_edge_n[f][k] = edge_n.at(Impl::edge_key(t[k], t[(k + 1) % 3]));
+  for (std::size_t i = 0; i < edge_uses.size();) {
+    std::size_t j = i;
+    Vec3 sum = Vec3::Zero();
+    for (; j < edge_uses.size() && edge_uses[j].first == edge_uses[i].first; ++j) sum += m.face_n[edge_uses[j].second / 3];
+    for (; i < j; ++i) m.face_edge_n[edge_uses[i].second / 3][edge_uses[i].second % 3] = sum;
   }
   m.device = rtcNewDevice(nullptr);
   if (!m.device) throw GeometryError({}, "Embree: cannot create a device");

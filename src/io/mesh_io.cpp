@@ -391,9 +391,10 @@ TriMesh load_mesh(const std::string& path) {
 
 MeshDefects find_defects(const TriMesh& m) {
   MeshDefects d;
-  // Directed edge counts keyed by (min, max) with the direction's sign.
-  std::unordered_map<std::uint64_t, std::pair<int, int>> edges;  // forward, backward
-  edges.reserve(m.triangles.size() * 3);
+  // Each directed edge as its undirected key (min, max) and whether it runs
+  // from max to min, sorted: an edge's uses are then one run.
+  std::vector<std::pair<std::uint64_t, bool>> uses;
+  uses.reserve(m.triangles.size() * 3);
   for (const auto& t : m.triangles) {
     if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) {
       ++d.degenerate_triangles;
@@ -402,15 +403,19 @@ MeshDefects find_defects(const TriMesh& m) {
     for (int k = 0; k < 3; ++k) {
       const std::uint32_t a = t[static_cast<std::size_t>(k)], b = t[static_cast<std::size_t>((k + 1) % 3)];
       const std::uint64_t key = (static_cast<std::uint64_t>(std::min(a, b)) << 32) | std::max(a, b);
-      auto& e = edges[key];
-      (a < b ? e.first : e.second)++;
+      uses.emplace_back(key, a > b);
     }
   }
-  for (const auto& [k, e] : edges) {
-    const int n = e.first + e.second;
+  std::sort(uses.begin(), uses.end());
+  for (std::size_t i = 0; i < uses.size();) {
+    std::size_t j = i;
+    int forward = 0, backward = 0;
+    for (; j < uses.size() && uses[j].first == uses[i].first; ++j) (uses[j].second ? backward : forward)++;
+    const int n = forward + backward;
     if (n == 1) ++d.open_edges;
     else if (n > 2) ++d.nonmanifold_edges;
-    else if (e.first != 1) ++d.flipped_edges;
+    else if (forward != 1) ++d.flipped_edges;
+    i = j;
   }
   return d;
 }
