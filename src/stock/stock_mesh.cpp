@@ -145,16 +145,16 @@ TriMesh Stock::surface_mesh(double adaptivity) const {
         for (int y = 0; y < 3; ++y)
           for (int z = 0; z < 3; ++z) v[x][y][z] = acc.getValue(base.offsetBy(x, y, z));
       auto sample = [&](const openvdb::Vec3d& a) {
-        const int o[3] = {static_cast<int>(std::floor(a[0])) - base.x(), static_cast<int>(std::floor(a[1])) - base.y(),
-                          static_cast<int>(std::floor(a[2])) - base.z()};
+        const openvdb::Vec3d fl(std::floor(a[0]), std::floor(a[1]), std::floor(a[2]));
+        const int o[3] = {static_cast<int>(fl[0]) - base.x(), static_cast<int>(fl[1]) - base.y(),
+                          static_cast<int>(fl[2]) - base.z()};
         if (o[0] < 0 || o[0] > 1 || o[1] < 0 || o[1] > 1 || o[2] < 0 || o[2] > 1)
           return openvdb::tools::BoxSampler::sample(acc, a);  // (rounding put the sample past the 3^3 voxels)
         float d[2][2][2];
         for (int x = 0; x < 2; ++x)
           for (int y = 0; y < 2; ++y)
             for (int z = 0; z < 2; ++z) d[x][y][z] = v[o[0] + x][o[1] + y][o[2] + z];
-        const openvdb::Vec3d uvw(a[0] - std::floor(a[0]), a[1] - std::floor(a[1]), a[2] - std::floor(a[2]));
-        return openvdb::tools::BoxSampler::trilinearInterpolation(d, uvw);
+        return openvdb::tools::BoxSampler::trilinearInterpolation(d, a - fl);
       };
       Vec3 gr;
       for (int k = 0; k < 3; ++k) {
