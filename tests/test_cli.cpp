@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "helpers.h"
+#include "cutsim/core/huge_pages.h"
 
 namespace cutsim::test {
 
@@ -303,6 +304,52 @@ TEST(Cli, BenchRunsTheCasesOfAFolder) {
                    j[0]["voxel_updates_per_s"].get<double>() / j[0]["kernel_updates_per_s"].get<double>());
   // An unknown case is a missing input.
   EXPECT_EQ(run_cli("bench nope --dir " + dir.path().string(), &out, &err), 66);
+}
+
+}  // namespace cutsim::test
+
+namespace cutsim::test {
+
+// GLIBC_TUNABLES gains glibc.malloc.hugetlb=1 once; a value the user set
+// stands, whatever it is.
+TEST(HugePages, TunableAddedOnceAndTheUsersStands) {
+  EXPECT_EQ(tunables_with_huge_pages(nullptr), "glibc.malloc.hugetlb=1");
+  EXPECT_EQ(tunables_with_huge_pages(""), "glibc.malloc.hugetlb=1");
+  EXPECT_EQ(tunables_with_huge_pages("glibc.malloc.arena_max=2"), "glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1");
+  EXPECT_EQ(tunables_with_huge_pages("glibc.malloc.hugetlb=0"), std::nullopt);
+  EXPECT_EQ(tunables_with_huge_pages("glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1"), std::nullopt);
+  EXPECT_EQ(tunables_with_huge_pages("glibc.malloc.hugetlbx=1"), "glibc.malloc.hugetlbx=1:glibc.malloc.hugetlb=1");
+}
+
+// cutsim starts itself again with huge pages asked for (where the kernel
+// has them and the allocator is glibc's), and `cutsim bench` says which
+// pages its runs had; CUTSIM_HUGE_PAGES=0 and a hugetlb the user set keep
+// it from doing so.
+TEST(Cli, StartsAgainWithHugePagesUnlessTold) {
+  TempDir dir;
+  dir.write("slot.nc", "G0 X-2 Y0 Z1\nG1 Z-0.1 F100\nG1 X2\nG0 Z1\nM30\n");
+  dir.write("slot.toml", "[stock]\nbox = [-1, -1, -1, 1, 1, 0]\n[tool]\nspec = \"flat:d=1\"\n[simulation]\nvoxel_mm = 0.05\n");
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  const bool can = false;  // the sanitizer's allocator, not glibc's
+#else
+  const bool can = transparent_huge_pages_available();
+#endif
+  auto huge = [&](const std::string& env) {
+    std::string out, err;
+    const std::string json = dir.file("b.json");
+    EXPECT_EQ(run_cli_raw("env -u GLIBC_TUNABLES -u CUTSIM_HUGE_PAGES " + env + " " + std::string(CUTSIM_BIN) +
+                              " bench --dir " + dir.path().string() + " --repeat 1 --threads 1 --json " + json,
+                          &out, &err),
+              0)
+        << err;
+    const auto j = nlohmann::json::parse(slurp(json));
+    EXPECT_EQ(out.find("malloc: transparent huge pages") != std::string::npos, j[0]["malloc_huge_pages"].get<bool>()) << out;
+    return j[0]["malloc_huge_pages"].get<bool>();
+  };
+  EXPECT_EQ(huge(""), can);
+  EXPECT_FALSE(huge("CUTSIM_HUGE_PAGES=0"));
+  EXPECT_FALSE(huge("GLIBC_TUNABLES=glibc.malloc.hugetlb=0"));
+  EXPECT_EQ(huge("GLIBC_TUNABLES=glibc.malloc.arena_max=4"), can);
 }
 
 }  // namespace cutsim::test

@@ -17,6 +17,7 @@
 
 #include "commands.h"
 #include "cutsim/core/error.h"
+#include "cutsim/core/huge_pages.h"
 #include "cutsim/io/atomic_file.h"
 #include "cutsim/sweep/sweep.h"
 
@@ -154,9 +155,13 @@ Action add_bench_command(CLI::App& app) {
     const std::string outdir = od;
 
     nlohmann::ordered_json rows = nlohmann::ordered_json::array();
+    // (The runs inherit this process's GLIBC_TUNABLES, and with it malloc's pages.)
+    const bool huge = malloc_huge_pages();
     std::printf("kernel: %.3g voxel updates/s on %d thread%s (ball-end distance, max, write back, in cache; "
-                "measured again before each run, /kern is to the case's median)\n",
-                kernel0, threads, threads == 1 ? "" : "s");
+                "measured again before each run, /kern is to the case's median)\n"
+                "malloc: %s\n",
+                kernel0, threads, threads == 1 ? "" : "s",
+                huge ? "transparent huge pages (glibc.malloc.hugetlb=1)" : "4 KB pages");
     std::printf("%-20s %8s %8s %8s %12s %8s %7s %9s %10s %10s %6s %6s %11s %11s %11s %8s %6s\n", "case", "blocks",
                 "moves", "voxel_um", "active_vox", "wall_s", "rss_MB", "moves/s", "eval/s", "vox_upd/s", "/kern", "eval%",
                 "removed_mm3", "over_mm3", "under_mm3", "contacts", "axis");
@@ -237,6 +242,7 @@ Action add_bench_command(CLI::App& app) {
       row["band_every"] = a->band_every;
       row["voxel_updates_per_s"] = vps;
       row["kernel_updates_per_s"] = kernel;
+      row["malloc_huge_pages"] = huge;
       row["update_to_kernel"] = kernel > 0 ? vps / kernel : 0;
       row["evaluated_fraction"] = band > 0 ? evals / band : 0;
       row["removed_mm3"] = rep["removed_volume_mm3"];

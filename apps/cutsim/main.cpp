@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <iostream>
 
+#include "cutsim/core/huge_pages.h"
 #include "cutsim/core/interrupt.h"
 
 #include "commands.h"
@@ -41,6 +42,9 @@ void install_handlers() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // First, before any output: with huge pages asked for, this returns only
+  // in the program started again (CUTSIM_HUGE_PAGES=0: not at all).
+  cutsim::reexec_with_huge_pages(argv);
   install_handlers();
   CLI::App app{"cutsim: simulate an NC program's cuts in a voxel stock"};
   app.require_subcommand(1);

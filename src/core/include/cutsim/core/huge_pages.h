@@ -1,0 +1,37 @@
+#pragma once
+// Transparent huge pages for malloc. The stock's leaves (2 KB each, a
+// million or more at 1 um) and the update's scratch come from glibc's
+// malloc in 4 KB pages, each first touch a page fault; on a virtual
+// machine a fault costs microseconds (the blade at 1 um took 1.1 M of
+// them, 13 s of system time). glibc's tunable glibc.malloc.hugetlb=1 has
+// malloc ask the kernel for 2 MB pages (madvise), but glibc reads its
+// tunables only when a program starts, so cutsim sets it and starts
+// itself again (reexec_with_huge_pages).
+#include <optional>
+#include <string>
+
+namespace cutsim {
+
+/// GLIBC_TUNABLES with glibc.malloc.hugetlb=1 added to `current` (null or
+/// empty: none set), or nullopt where `current` already sets that tunable
+/// (whatever its value: the user's choice stands).
+std::optional<std::string> tunables_with_huge_pages(const char* current);
+
+/// Whether the kernel gives transparent huge pages where madvise asks for
+/// them: /sys/kernel/mm/transparent_hugepage/enabled reads "[always]" or
+/// "[madvise]".
+bool transparent_huge_pages_available();
+
+/// Whether this process's malloc asks for huge pages: GLIBC_TUNABLES sets
+/// glibc.malloc.hugetlb=1 and the kernel has them. (Under a sanitizer,
+/// whose allocator is not glibc's, false.)
+bool malloc_huge_pages();
+
+/// Starts this program again (/proc/self/exe, the same arguments) with
+/// glibc.malloc.hugetlb=1 added to GLIBC_TUNABLES, where that can help:
+/// not when GLIBC_TUNABLES already sets it, CUTSIM_HUGE_PAGES=0, the
+/// kernel has no transparent huge pages, under valgrind (LD_PRELOAD) or a
+/// sanitizer. Returns only where it does not (or the exec fails).
+void reexec_with_huge_pages(char** argv);
+
+}  // namespace cutsim
