@@ -45,6 +45,7 @@ int main(int argc, char** argv) {
   // First, before any output: with huge pages asked for, this returns only
   // in the program started again (CUTSIM_HUGE_PAGES=0: not at all).
   cutsim::reexec_with_huge_pages(argv);
+  cutsim::keep_freed_memory();
   install_handlers();
   CLI::App app{"cutsim: simulate an NC program's cuts in a voxel stock"};
   app.require_subcommand(1);

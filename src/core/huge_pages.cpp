@@ -1,7 +1,9 @@
 #include "cutsim/core/huge_pages.h"
 
+#include <malloc.h>
 #include <unistd.h>
 
+#include <climits>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -49,6 +51,12 @@ bool transparent_huge_pages_available() {
 bool malloc_huge_pages() {
   if (kSanitized) return false;
   return tunable_value(std::getenv("GLIBC_TUNABLES")) == "1" && transparent_huge_pages_available();
+}
+
+void keep_freed_memory() {
+  if (kSanitized) return;
+  ::mallopt(M_MMAP_THRESHOLD, 32 << 20);  // (glibc's largest)
+  ::mallopt(M_TRIM_THRESHOLD, INT_MAX);
 }
 
 void reexec_with_huge_pages(char** argv) {
