@@ -329,11 +329,7 @@ TEST(Cli, StartsAgainWithHugePagesUnlessTold) {
   TempDir dir;
   dir.write("slot.nc", "G0 X-2 Y0 Z1\nG1 Z-0.1 F100\nG1 X2\nG0 Z1\nM30\n");
   dir.write("slot.toml", "[stock]\nbox = [-1, -1, -1, 1, 1, 0]\n[tool]\nspec = \"flat:d=1\"\n[simulation]\nvoxel_mm = 0.05\n");
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-  const bool can = false;  // the sanitizer's allocator, not glibc's
-#else
-  const bool can = transparent_huge_pages_available();
-#endif
+  const bool can = malloc_is_glibcs() && transparent_huge_pages_available();
   auto huge = [&](const std::string& env) {
     std::string out, err;
     const std::string json = dir.file("b.json");

@@ -15,6 +15,13 @@ namespace {
 constexpr const char* kTunable = "glibc.malloc.hugetlb";
 
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#define CUTSIM_SANITIZED 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) || __has_feature(memory_sanitizer)
+#define CUTSIM_SANITIZED 1
+#endif
+#endif
+#ifdef CUTSIM_SANITIZED
 constexpr bool kSanitized = true;
 #else
 constexpr bool kSanitized = false;
@@ -40,6 +47,8 @@ std::optional<std::string> tunables_with_huge_pages(const char* current) {
   if (!current || !*current) return add;
   return std::string(current) + ":" + add;
 }
+
+bool malloc_is_glibcs() { return !kSanitized; }
 
 bool transparent_huge_pages_available() {
   std::ifstream in("/sys/kernel/mm/transparent_hugepage/enabled");

@@ -17,6 +17,9 @@ namespace cutsim {
 /// (whatever its value: the user's choice stands).
 std::optional<std::string> tunables_with_huge_pages(const char* current);
 
+/// Whether malloc is glibc's (not a sanitizer's).
+bool malloc_is_glibcs();
+
 /// Whether the kernel gives transparent huge pages where madvise asks for
 /// them: /sys/kernel/mm/transparent_hugepage/enabled reads "[always]" or
 /// "[madvise]".
