@@ -321,6 +321,88 @@ TEST(Volume, TheBuiltBlockIsItsClampedDistanceAtEveryVoxel) {
   EXPECT_LT(worst, 1e-7 * h) << "at voxel " << worst_at;
 }
 
+// The ROI's blocks by groups (the grid's 128^3 nodes): with every group
+// let through, the same blocks as one by one, each once; a group skipped
+// skips its blocks and no other; a group's blocks lie in its ball, and a
+// group called uniform holds its value at every voxel of them. The stock
+// spans nine nodes along x at 5 um (a cut pocket makes some all air, the
+// material below some all material, the faces' band the rest mixed).
+TEST(Volume, BlockGroupsHoldTheirBlocksAndKnowTheirTiles) {
+  const double h = 0.005;
+  const Aabb box{Vec3(-2.5, -0.6, -1.2), Vec3(2.5, 0.6, 0)};
+  stock::StockOptions so;
+  so.voxel_mm = h;
+  stock::Stock s(box, Aabb{Vec3(-2.3, -0.7, -1.3), Vec3(2.3, 0.5, 0.1)}, so);
+  s.subtract(sweep::sweep_line(Vec3(-1.6, 0, 1), Vec3(1.6, 0, -0.9), Eigen::Matrix3d::Identity(),
+                               tool::parse_tool_spec("flat:d=1.6", "test")));
+  const auto dims = s.roi_block_dims();
+  auto index = [&](const int* l) { return (static_cast<std::size_t>(l[0]) * dims[1] + l[1]) * dims[2] + l[2]; };
+  const std::size_t n = static_cast<std::size_t>(dims[0]) * dims[1] * dims[2];
+  std::vector<std::atomic<int>> plain(n), grouped(n), in_group(n);
+  s.for_each_roi_block([&](const stock::VoxelBlock& b) { plain[index(b.leaf)] += 1; });
+  std::atomic<int> groups{0}, uniform_groups{0}, skipped{0}, wrong{0};
+  std::vector<std::atomic<int>> skip_mark(n);
+  s.for_each_roi_block(
+      [&](const stock::VoxelBlock& b) {
+        const std::size_t i = index(b.leaf);
+        grouped[i] += 1;
+        if (skip_mark[i] != 0) ++wrong;  // a block of a skipped group
+        if (in_group[i] == 0) ++wrong;   // visited outside its group's call
+      },
+      true,
+      [&](const stock::BlockGroup& g) {
+        ++groups;
+        for (int x = g.lo[0]; x < g.hi[0]; ++x)
+          for (int y = g.lo[1]; y < g.hi[1]; ++y)
+            for (int z = g.lo[2]; z < g.hi[2]; ++z) {
+              const int l[3] = {x, y, z};
+              in_group[index(l)] += 1;
+            }
+        // Every 7th group is skipped.
+        const bool skip = (g.lo[0] * 31 + g.lo[1] * 7 + g.lo[2]) % 7 == 3;
+        if (skip) {
+          ++skipped;
+          for (int x = g.lo[0]; x < g.hi[0]; ++x)
+            for (int y = g.lo[1]; y < g.hi[1]; ++y)
+              for (int z = g.lo[2]; z < g.hi[2]; ++z) {
+                const int l[3] = {x, y, z};
+                skip_mark[index(l)] = 1;
+              }
+        }
+        // The group's voxels as the blocks' own visit gives them.
+        std::atomic<int> far{0}, off{0};
+        s.for_each_roi_block([&](const stock::VoxelBlock& b) {
+          if (b.leaf[0] < g.lo[0] || b.leaf[0] >= g.hi[0] || b.leaf[1] < g.lo[1] || b.leaf[1] >= g.hi[1] ||
+              b.leaf[2] < g.lo[2] || b.leaf[2] >= g.hi[2])
+            return;
+          for (int x = 0; x < b.n[0]; ++x)
+            for (int y = 0; y < b.n[1]; ++y)
+              for (int z = 0; z < b.n[2]; ++z) {
+                const Vec3 p = b.first_center + h * Vec3(x, y, z);
+                if ((p - g.centre).norm() > g.radius) ++far;
+                const float v = b.uniform ? b.value : b.values[(x * 8 + y) * 8 + z];
+                if (g.uniform && v != g.value) ++off;
+              }
+        });
+        if (far != 0 || off != 0) ++wrong;
+        if (g.uniform) ++uniform_groups;
+        return !skip;
+      });
+  EXPECT_EQ(wrong.load(), 0);
+  EXPECT_GE(groups.load(), 9 * 2);
+  EXPECT_GT(uniform_groups.load(), 0);
+  EXPECT_LT(uniform_groups.load(), groups.load());
+  EXPECT_GT(skipped.load(), 0);
+  std::size_t blocks = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    blocks += plain[i] == 1;
+    ASSERT_EQ(plain[i].load(), 1) << "block " << i;
+    ASSERT_EQ(in_group[i].load(), 1) << "block " << i << " in more or fewer groups than one";
+    ASSERT_EQ(grouped[i].load(), skip_mark[i] != 0 ? 0 : 1) << "block " << i;
+  }
+  EXPECT_EQ(blocks, n);
+}
+
 // Every voxel of the ROI, by block.
 std::map<std::tuple<double, double, double>, std::vector<float>> voxels_of(const stock::Stock& s) {
   std::mutex mu;

@@ -131,6 +131,18 @@ struct TargetBlocks {
   }
 };
 
+// Calls fn(index) for the group's blocks in the lattice until it returns false.
+template <class Fn>
+bool for_each_in(const stock::BlockGroup& g, const TargetBlocks& tb, Fn fn) {
+  for (int x = g.lo[0]; x < g.hi[0]; ++x)
+    for (int y = g.lo[1]; y < g.hi[1]; ++y)
+      for (int z = g.lo[2]; z < g.hi[2]; ++z) {
+        const int l[3] = {x, y, z};
+        if (!fn(tb.index(l))) return false;
+      }
+  return true;
+}
+
 TargetBlocks classify_blocks(const stock::Stock& stock, const Target& target, double h, double reach) {
   TargetBlocks tb;
   tb.dims = stock.roi_block_dims();
@@ -149,7 +161,20 @@ TargetBlocks classify_blocks(const stock::Stock& stock, const Target& target, do
           tb.state[i] = 0;
         }
       },
-      false);
+      false,
+      // A group with no surface within reach of any of its block centres:
+      // every block far, on the side of the group's centre (one query for
+      // up to 4096 blocks; the blade's ROI at 1 um has 47 M).
+      [&](const stock::BlockGroup& g) {
+        if (target.signed_distance_if_within(g.centre, g.radius + reach)) return true;
+        const float s = target.signed_distance(g.centre) < 0 ? -tb.far_value : tb.far_value;
+        for_each_in(g, tb, [&](std::size_t i) {
+          tb.state[i] = 1;
+          tb.d[i] = s;
+          return true;
+        });
+        return false;
+      });
   // Breadth-first over the lattice from every block whose sign can pass on.
   std::vector<std::size_t> queue;
   for (std::size_t i = 0; i < n; ++i)
@@ -363,51 +388,9 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
   std::atomic<int> shift{0};  // the region meshes' cells: 2^shift voxels
   std::mutex mu;
   const Vec3 lattice = stock.roi_lattice_origin();
-  stock.for_each_roi_block([&](const stock::VoxelBlock& b) {
-    const std::size_t bi = tb.index(b.leaf);
-    const double dc = tb.d[bi];
-    float dt[512];
-    if (tb.state[bi] == 1 || std::fabs(dc) >= hd + h) {
-      // Both uniform on the same side (material under material, air in air):
-      // nothing to count or draw.
-      if (b.uniform && (b.value < 0) == (dc < 0) && std::fabs(b.value) >= 0.5 * h) return;
-      std::fill(std::begin(dt), std::end(dt), static_cast<float>(dc < 0 ? -h : h));
-    } else {
-      block_target_distances(b, block_centre(b, h), dc, target, h, dt);
-    }
-    double over = 0, under = 0;
-    for (int x = 0; x < b.n[0]; ++x)
-      for (int y = 0; y < b.n[1]; ++y)
-        for (int z = 0; z < b.n[2]; ++z) {
-          const int i = (x * 8 + y) * 8 + z;
-          const double sv = b.uniform ? b.value : b.values[i], tv = dt[i];
-          if (agree_beyond_h(sv, tv, h)) continue;
-          const double fs = fraction(sv, h);
-          const double ft = fraction(tv, h);
-          over += std::max(0.0, ft - fs);
-          under += std::max(0.0, fs - ft);
-        }
-    if (over == 0 && under == 0) return;  // most blocks: stock and target agree
-    RegionBlock ro, ru;
-    const Vec3 idx = (b.first_center - lattice) / h;
-    ro.origin = ru.origin = openvdb::Coord(static_cast<int>(std::lround(idx.x())), static_cast<int>(std::lround(idx.y())),
-                                           static_cast<int>(std::lround(idx.z())));
-    for (int k = 0; k < 3; ++k) ro.n[k] = ru.n[k] = b.n[k];
-    ro.shift = ru.shift = shift.load();
-    const int s = ro.side();
-    ro.v.assign(static_cast<std::size_t>(s * s * s), 127);
-    ru.v.assign(static_cast<std::size_t>(s * s * s), 127);
-    for (int x = 0; x < b.n[0]; ++x)
-      for (int y = 0; y < b.n[1]; ++y)
-        for (int z = 0; z < b.n[2]; ++z) {
-          const int i = (x * 8 + y) * 8 + z;
-          const double cs = std::clamp<double>(b.uniform ? b.value : b.values[i], -h, h);
-          if (agree_beyond_h(cs, dt[i], h)) continue;  // (both regions' values 127, the fill)
-          const auto c = static_cast<std::size_t>(
-              (ro.cell(ro.origin.x() + x, 0) * s + ro.cell(ro.origin.y() + y, 1)) * s + ro.cell(ro.origin.z() + z, 2));
-          ro.v[c] = std::min(ro.v[c], quantize(std::max<double>(dt[i], -cs), h));
-          ru.v[c] = std::min(ru.v[c], quantize(std::max<double>(cs, -dt[i]), h));
-        }
+  // A block's region level sets kept, under the lock, coarsened to the
+  // present cells.
+  auto keep = [&](const stock::VoxelBlock& b, double over, double under, RegionBlock&& ro, RegionBlock&& ru) {
     std::lock_guard<std::mutex> lock(mu);
     sums.push_back({b.first_center, over, under});
     if (over > 0) over_blocks.push_back(std::move(ro));
@@ -426,6 +409,102 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
       if (over > 0) over_blocks.back().coarsen(sh);
       if (under > 0) under_blocks.back().coarsen(sh);
     }
+  };
+  auto region_block = [&](const stock::VoxelBlock& b) {
+    RegionBlock rb;
+    const Vec3 idx = (b.first_center - lattice) / h;
+    rb.origin = openvdb::Coord(static_cast<int>(std::lround(idx.x())), static_cast<int>(std::lround(idx.y())),
+                               static_cast<int>(std::lround(idx.z())));
+    for (int k = 0; k < 3; ++k) rb.n[k] = b.n[k];
+    rb.shift = shift.load();
+    const int s = rb.side();
+    rb.v.assign(static_cast<std::size_t>(s * s * s), 127);
+    return rb;
+  };
+  // A uniform block (a tile: all material or all air) where the target is
+  // uniform too (+-h at every voxel): every voxel adds the same to the
+  // volumes and the same value to its cell, so the sums are products and
+  // the cells are filled. Only where each voxel adds 0 or 1 (a tile's
+  // +-band against +-h): then the products are the voxel loop's sums
+  // exactly. (The blade's undercut under its roughing, 0.4 mm3 at 1 um,
+  // some 770k blocks of 512 voxels, was most of its comparison's time.)
+  // False: left to the voxel loop.
+  auto uniform_block = [&](const stock::VoxelBlock& b, float tv) {
+    const double sv = b.value;
+    const double fs = fraction(sv, h), ft = fraction(tv, h);
+    const double x = std::max(0.0, ft - fs), y = std::max(0.0, fs - ft);
+    if ((x != 0 && x != 1) || (y != 0 && y != 1)) return false;
+    if (agree_beyond_h(sv, tv, h)) return true;  // nothing to count or draw
+    const double nvox = static_cast<double>(b.n[0] * b.n[1] * b.n[2]);
+    const double over = x * nvox, under = y * nvox;
+    if (over == 0 && under == 0) return true;
+    RegionBlock ro = region_block(b), ru = region_block(b);
+    const double cs = std::clamp<double>(sv, -h, h);
+    if (!agree_beyond_h(cs, tv, h)) {
+      const std::int8_t qo = quantize(std::max<double>(tv, -cs), h), qu = quantize(std::max<double>(cs, -tv), h);
+      const int s = ro.side();
+      int c1[3];
+      for (int k = 0; k < 3; ++k) c1[k] = ro.cell(ro.origin[k] + b.n[k] - 1, k);
+      for (int cx = 0; cx <= c1[0]; ++cx)
+        for (int cy = 0; cy <= c1[1]; ++cy)
+          for (int cz = 0; cz <= c1[2]; ++cz) {
+            const auto c = static_cast<std::size_t>((cx * s + cy) * s + cz);
+            ro.v[c] = std::min(ro.v[c], qo);
+            ru.v[c] = std::min(ru.v[c], qu);
+          }
+    }
+    keep(b, over, under, std::move(ro), std::move(ru));
+    return true;
+  };
+  stock.for_each_roi_block([&](const stock::VoxelBlock& b) {
+    const std::size_t bi = tb.index(b.leaf);
+    const double dc = tb.d[bi];
+    float dt[512];
+    if (tb.state[bi] == 1 || std::fabs(dc) >= hd + h) {
+      // Both uniform on the same side (material under material, air in air):
+      // nothing to count or draw.
+      if (b.uniform && (b.value < 0) == (dc < 0) && std::fabs(b.value) >= 0.5 * h) return;
+      if (b.uniform && uniform_block(b, static_cast<float>(dc < 0 ? -h : h))) return;
+      std::fill(std::begin(dt), std::end(dt), static_cast<float>(dc < 0 ? -h : h));
+    } else {
+      block_target_distances(b, block_centre(b, h), dc, target, h, dt);
+    }
+    double over = 0, under = 0;
+    for (int x = 0; x < b.n[0]; ++x)
+      for (int y = 0; y < b.n[1]; ++y)
+        for (int z = 0; z < b.n[2]; ++z) {
+          const int i = (x * 8 + y) * 8 + z;
+          const double sv = b.uniform ? b.value : b.values[i], tv = dt[i];
+          if (agree_beyond_h(sv, tv, h)) continue;
+          const double fs = fraction(sv, h);
+          const double ft = fraction(tv, h);
+          over += std::max(0.0, ft - fs);
+          under += std::max(0.0, fs - ft);
+        }
+    if (over == 0 && under == 0) return;  // most blocks: stock and target agree
+    RegionBlock ro = region_block(b), ru = region_block(b);
+    const int s = ro.side();
+    for (int x = 0; x < b.n[0]; ++x)
+      for (int y = 0; y < b.n[1]; ++y)
+        for (int z = 0; z < b.n[2]; ++z) {
+          const int i = (x * 8 + y) * 8 + z;
+          const double cs = std::clamp<double>(b.uniform ? b.value : b.values[i], -h, h);
+          if (agree_beyond_h(cs, dt[i], h)) continue;  // (both regions' values 127, the fill)
+          const auto c = static_cast<std::size_t>(
+              (ro.cell(ro.origin.x() + x, 0) * s + ro.cell(ro.origin.y() + y, 1)) * s + ro.cell(ro.origin.z() + z, 2));
+          ro.v[c] = std::min(ro.v[c], quantize(std::max<double>(dt[i], -cs), h));
+          ru.v[c] = std::min(ru.v[c], quantize(std::max<double>(cs, -dt[i]), h));
+        }
+    keep(b, over, under, std::move(ro), std::move(ru));
+  }, true,
+  // A group the stock holds uniform (a tile) where every block is far from
+  // the target on the tile's side: the blocks' own test, once for them all.
+  [&](const stock::BlockGroup& g) {
+    if (!g.uniform || !(std::fabs(g.value) >= 0.5 * h)) return true;
+    return !for_each_in(g, tb, [&](std::size_t i) {
+      const double dc = tb.d[i];
+      return (tb.state[i] == 1 || std::fabs(dc) >= hd + h) && (g.value < 0) == (dc < 0);
+    });
   });
   std::sort(sums.begin(), sums.end(), [](const Sum& a, const Sum& b) {
     return std::lexicographical_compare(a.key.data(), a.key.data() + 3, b.key.data(), b.key.data() + 3);

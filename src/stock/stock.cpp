@@ -1819,46 +1819,117 @@ double Stock::surface_height(double x, double y, double z_from) const {
   return std::numeric_limits<double>::quiet_NaN();
 }
 
-void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn, bool values) const {
+void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn, bool values,
+                               const std::function<bool(const BlockGroup&)>& group) const {
   const Impl& m = *impl_;
   const CoordBBox& r = m.roi_index;
   const Coord first(r.min().x() & ~(kLeafDim - 1), r.min().y() & ~(kLeafDim - 1), r.min().z() & ~(kLeafDim - 1));
   // The lattice by index, not as a list: a large ROI has tens of millions of blocks.
   const std::array<int, 3> dims = roi_block_dims();
-  const std::size_t count = static_cast<std::size_t>(dims[0]) * dims[1] * dims[2];
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count), [&](const auto& range) {
-    auto acc = m.grid->getConstAccessor();
-    VoxelBlock b;
-    for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const int l[3] = {static_cast<int>(i / (static_cast<std::size_t>(dims[1]) * dims[2])),
-                        static_cast<int>((i / dims[2]) % dims[1]), static_cast<int>(i % dims[2])};
-      const Coord origin = first.offsetBy(l[0] * kLeafDim, l[1] * kLeafDim, l[2] * kLeafDim);
-      CoordBBox part = CoordBBox::createCube(origin, kLeafDim);
-      part.intersect(r);
-      if (part.empty()) continue;
-      const Coord lo = part.min();
-      b.first_center = m.origin + m.h * Vec3(lo.x(), lo.y(), lo.z());
-      for (int k = 0; k < 3; ++k) {
-        b.n[k] = part.max()[k] - lo[k] + 1;
-        b.leaf[k] = l[k];
+  // The lattice's blocks in [lo, hi) (in the order of the lattice's index).
+  auto blocks = [&](const std::array<int, 3>& lo, const std::array<int, 3>& hi,
+                    openvdb::tree::ValueAccessor<const openvdb::FloatTree>& acc, VoxelBlock& b) {
+    for (int lx = lo[0]; lx < hi[0]; ++lx)
+      for (int ly = lo[1]; ly < hi[1]; ++ly)
+        for (int lz = lo[2]; lz < hi[2]; ++lz) {
+          const Coord origin = first.offsetBy(lx * kLeafDim, ly * kLeafDim, lz * kLeafDim);
+          CoordBBox part = CoordBBox::createCube(origin, kLeafDim);
+          part.intersect(r);
+          if (part.empty()) continue;
+          const Coord l0 = part.min();
+          b.first_center = m.origin + m.h * Vec3(l0.x(), l0.y(), l0.z());
+          const int l[3] = {lx, ly, lz};
+          for (int k = 0; k < 3; ++k) {
+            b.n[k] = part.max()[k] - l0[k] + 1;
+            b.leaf[k] = l[k];
+          }
+          if (values) {
+            const LeafT* leaf = acc.probeConstLeaf(l0);
+            b.uniform = leaf == nullptr;
+            if (b.uniform) {
+              b.value = acc.getValue(l0);
+            } else {
+              // From the leaf's buffer (its voxels x-major like the block's), not
+              // voxel by voxel through getValue.
+              const float* data = leaf->buffer().data();
+              const Coord d = l0 - leaf->origin();
+              for (int x = 0; x < b.n[0]; ++x)
+                for (int y = 0; y < b.n[1]; ++y)
+                  for (int z = 0; z < b.n[2]; ++z)
+                    b.values[(x * 8 + y) * 8 + z] = data[((d.x() + x) << 6) | ((d.y() + y) << 3) | (d.z() + z)];
+            }
+          }
+          fn(b);
+        }
+  };
+  if (!group) {
+    const std::size_t count = static_cast<std::size_t>(dims[0]) * dims[1] * dims[2];
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 256), [&](const auto& range) {
+      openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(m.grid->tree());
+      VoxelBlock b;
+      // (By runs along z: a range of the flat index is at most a few of them.)
+      for (std::size_t i = range.begin(); i != range.end();) {
+        const std::size_t row = i / static_cast<std::size_t>(dims[2]);
+        const int lz0 = static_cast<int>(i % static_cast<std::size_t>(dims[2]));
+        const std::size_t end = std::min<std::size_t>(range.end(), (row + 1) * static_cast<std::size_t>(dims[2]));
+        const int lx = static_cast<int>(row / static_cast<std::size_t>(dims[1])), ly = static_cast<int>(row % static_cast<std::size_t>(dims[1]));
+        blocks({lx, ly, lz0}, {lx + 1, ly + 1, lz0 + static_cast<int>(end - i)}, acc, b);
+        i = end;
       }
+    });
+    return;
+  }
+  // Groups: the lattice cut by the grid's 128^3 nodes (16^3 blocks each, as
+  // the lattice's blocks are the grid's leaves).
+  std::array<int, 3> gdims{}, g0{};
+  for (int k = 0; k < 3; ++k) {
+    // Lattice block l starts at index first[k] + 8 l; its node is floor of that / 128.
+    g0[static_cast<std::size_t>(k)] = first[k] >> 7;
+    gdims[static_cast<std::size_t>(k)] = ((first[k] + kLeafDim * (dims[static_cast<std::size_t>(k)] - 1)) >> 7) - g0[static_cast<std::size_t>(k)] + 1;
+  }
+  static_assert(kNode1Dim == 128, "groups are the tree's 128^3 nodes");
+  const std::size_t ngroups = static_cast<std::size_t>(gdims[0]) * gdims[1] * gdims[2];
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ngroups, 1), [&](const auto& range) {
+    openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(m.grid->tree());
+    VoxelBlock b;
+    for (std::size_t gi = range.begin(); gi != range.end(); ++gi) {
+      const int gl[3] = {static_cast<int>(gi / (static_cast<std::size_t>(gdims[1]) * gdims[2])),
+                         static_cast<int>((gi / gdims[2]) % gdims[1]), static_cast<int>(gi % gdims[2])};
+      BlockGroup g;
+      const Coord node((g0[0] + gl[0]) * kNode1Dim, (g0[1] + gl[1]) * kNode1Dim, (g0[2] + gl[2]) * kNode1Dim);
+      for (int k = 0; k < 3; ++k) {
+        const auto uk = static_cast<std::size_t>(k);
+        // Blocks whose first index lies in [node, node + 128).
+        g.lo[uk] = std::max(0, (node[k] - first[k]) / kLeafDim);
+        g.hi[uk] = std::min(dims[uk], (node[k] + kNode1Dim - first[k]) / kLeafDim);
+      }
+      if (g.lo[0] >= g.hi[0] || g.lo[1] >= g.hi[1] || g.lo[2] >= g.hi[2]) continue;
+      CoordBBox vox(first.offsetBy(g.lo[0] * kLeafDim, g.lo[1] * kLeafDim, g.lo[2] * kLeafDim),
+                    first.offsetBy(g.hi[0] * kLeafDim - 1, g.hi[1] * kLeafDim - 1, g.hi[2] * kLeafDim - 1));
+      vox.intersect(r);
+      if (vox.empty()) continue;
+      const Vec3 a = m.origin + m.h * Vec3(vox.min().x(), vox.min().y(), vox.min().z());
+      const Vec3 c = m.origin + m.h * Vec3(vox.max().x(), vox.max().y(), vox.max().z());
+      g.centre = 0.5 * (a + c);
+      g.radius = 0.5 * (c - a).norm() * (1 + 1e-12) + 1e-12;
       if (values) {
-        const LeafT* leaf = acc.probeConstLeaf(lo);
-        b.uniform = leaf == nullptr;
-        if (b.uniform) {
-          b.value = acc.getValue(lo);
-        } else {
-          // From the leaf's buffer (its voxels x-major like the block's), not
-          // voxel by voxel through getValue.
-          const float* data = leaf->buffer().data();
-          const Coord d = lo - leaf->origin();
-          for (int x = 0; x < b.n[0]; ++x)
-            for (int y = 0; y < b.n[1]; ++y)
-              for (int z = 0; z < b.n[2]; ++z)
-                b.values[(x * 8 + y) * 8 + z] = data[((d.x() + x) << 6) | ((d.y() + y) << 3) | (d.z() + z)];
+        using Node1 = openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType;  // 128^3
+        const auto* n1 = acc.template probeConstNode<Node1>(node);
+        if (!n1) {
+          g.uniform = true;
+          g.value = acc.getValue(node);
+        } else if (n1->getChildMask().isOff()) {
+          g.uniform = true;
+          g.value = n1->getFirstValue();
+          for (auto it = n1->cbeginValueAll(); it; ++it)
+            if (*it != g.value) {
+              g.uniform = false;
+              break;
+            }
         }
       }
-      fn(b);
+      if (!group(g)) continue;
+      blocks(g.lo, g.hi, acc, b);
     }
   });
 }

@@ -55,6 +55,16 @@ struct VoxelBlock {
   float values[512];   ///< level-set values, index (x * 8 + y) * 8 + z, when not uniform
 };
 
+/// The blocks of the region of interest that one 128^3-voxel node of the
+/// grid holds (Stock::for_each_roi_block).
+struct BlockGroup {
+  std::array<int, 3> lo{}, hi{};  ///< their VoxelBlock::leaf range, [lo, hi) along each axis
+  Vec3 centre;                    ///< centre of the box their voxel centres span
+  double radius = 0;              ///< half that box's diagonal: every voxel centre is this near `centre`
+  bool uniform = false;           ///< the stock holds `value` at every voxel of them (no leaf, one tile value)
+  float value = 0;
+};
+
 /// How deep a region reaches into the material (see Stock::overlap).
 struct Overlap {
   double depth_mm = 0;        ///< deepest overlap found (0: none above the threshold)
@@ -136,7 +146,11 @@ public:
   /// Calls `fn` for every block of the region of interest, in parallel;
   /// `fn` must be safe to call from several threads at once.
   /// With `values` false, only the block's place and size are filled in.
-  void for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn, bool values = true) const;
+  /// With `group`, the blocks come by groups (those of one 128^3-voxel node
+  /// of the grid), and a group's are visited only where `group` returns
+  /// true for it (called once per group, also in parallel).
+  void for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn, bool values = true,
+                          const std::function<bool(const BlockGroup&)>& group = {}) const;
   /// Blocks of the region of interest along x, y, z (VoxelBlock::leaf).
   std::array<int, 3> roi_block_dims() const;
   /// World centre of the first voxel of block lattice cell (0, 0, 0): a
