@@ -310,24 +310,38 @@ void Stock::Impl::update_node_bit(const Coord& o) {
 void Stock::Impl::refresh_occupancy(std::vector<Coord> blocks) {
   std::sort(blocks.begin(), blocks.end());
   blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
-  openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(grid->tree());
+  // Which of the blocks marked may-hold-material hold none now, on both
+  // threads (the tree is only read; the blade's roughing at 1 um checks
+  // 740k); then their bits and their nodes', on one.
   constexpr int kDim = 1 << kBlockLog2;
-  for (const Coord& b : blocks) {
-    const std::int64_t i = occ.index(b);
-    if (i < 0 || !occ.test(i)) continue;
-    bool material = false;
-    for (int lx = 0; lx < kDim && !material; lx += kLeafDim)
-      for (int ly = 0; ly < kDim && !material; ly += kLeafDim)
-        for (int lz = 0; lz < kDim && !material; lz += kLeafDim) {
-          const Coord o = b.offsetBy(lx, ly, lz);
-          material = acc.probeConstLeaf(o) || acc.getValue(o) <= 0;
-        }
-    if (!material) {
-      occ.set(i, false);
-      constexpr int kMask = ~((1 << kNodeLog2) - 1);
-      update_node_bit(Coord(b.x() & kMask, b.y() & kMask, b.z() & kMask));
+  std::vector<char> emptied(blocks.size(), 0);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 64), [&](const auto& r) {
+    openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(grid->tree());
+    for (std::size_t j = r.begin(); j != r.end(); ++j) {
+      const Coord& b = blocks[j];
+      const std::int64_t i = occ.index(b);
+      if (i < 0 || !occ.test(i)) continue;
+      bool material = false;
+      for (int lx = 0; lx < kDim && !material; lx += kLeafDim)
+        for (int ly = 0; ly < kDim && !material; ly += kLeafDim)
+          for (int lz = 0; lz < kDim && !material; lz += kLeafDim) {
+            const Coord o = b.offsetBy(lx, ly, lz);
+            material = acc.probeConstLeaf(o) || acc.getValue(o) <= 0;
+          }
+      emptied[j] = !material;
     }
+  });
+  constexpr int kMask = ~((1 << kNodeLog2) - 1);
+  std::vector<Coord> touched;  // their nodes (in order, as the blocks are)
+  for (std::size_t j = 0; j < blocks.size(); ++j) {
+    if (!emptied[j]) continue;
+    occ.set(occ.index(blocks[j]), false);
+    const Coord node(blocks[j].x() & kMask, blocks[j].y() & kMask, blocks[j].z() & kMask);
+    if (touched.empty() || touched.back() != node) touched.push_back(node);
   }
+  std::sort(touched.begin(), touched.end());
+  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+  for (const Coord& node : touched) update_node_bit(node);
 }
 
 double Stock::Impl::grid_volume() const {
@@ -810,6 +824,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
   auto apply = [&](std::vector<std::uint64_t>& pairs, std::size_t from, std::size_t to) {
     std::vector<Coord> aired;  // 32^3 blocks that may now hold only air
     auto block_of = [](const Coord& o) { return Coord(o.x() & ~(kMid - 1), o.y() & ~(kMid - 1), o.z() & ~(kMid - 1)); };
+    // (Leaves come in key order, a block's mostly one after another: the
+    // blade's roughing listed each block 8 times, 6 M a run, to sort.)
+    auto air_block = [&aired](const Coord& b) {
+      if (aired.empty() || aired.back() != b) aired.push_back(b);
+    };
     // 1b. Topology, on one thread: the blocks held deep inside a piece
     //    become air tiles; the pairs in them are then passed over as air.
     //    Pieces of a batch overlap, so most blocks come more than once.
@@ -969,7 +988,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
       if (action[gi] == to_air) {
         if (tacc.probeLeaf(o) || tacc.getValue(o) <= 0) {
           tacc.addTile(1, o, m.gamma, false);
-          aired.push_back(block_of(o));
+          air_block(block_of(o));
         }
         continue;
       }
@@ -1458,7 +1477,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
     for (std::size_t i = 0; i < leaves.size(); ++i) {
       if (tiled[i] == kLeaf) continue;
       const Coord o = leaves[i]->origin();
-      if (tiled[i] == kAir) aired.push_back(block_of(o));
+      if (tiled[i] == kAir) air_block(block_of(o));
       tacc.addTile(1, o, tiled[i] == kAir ? m.gamma : -m.gamma, false);
     }
     m.refresh_occupancy(std::move(aired));
