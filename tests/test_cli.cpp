@@ -306,10 +306,6 @@ TEST(Cli, BenchRunsTheCasesOfAFolder) {
   EXPECT_EQ(run_cli("bench nope --dir " + dir.path().string(), &out, &err), 66);
 }
 
-}  // namespace cutsim::test
-
-namespace cutsim::test {
-
 // GLIBC_TUNABLES gains glibc.malloc.hugetlb=1 once; a value the user set
 // stands, whatever it is.
 TEST(HugePages, TunableAddedOnceAndTheUsersStands) {

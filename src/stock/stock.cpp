@@ -1881,25 +1881,9 @@ void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn,
           fn(b);
         }
   };
-  if (!group) {
-    const std::size_t count = static_cast<std::size_t>(dims[0]) * dims[1] * dims[2];
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 256), [&](const auto& range) {
-      openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(m.grid->tree());
-      VoxelBlock b;
-      // (By runs along z: a range of the flat index is at most a few of them.)
-      for (std::size_t i = range.begin(); i != range.end();) {
-        const std::size_t row = i / static_cast<std::size_t>(dims[2]);
-        const int lz0 = static_cast<int>(i % static_cast<std::size_t>(dims[2]));
-        const std::size_t end = std::min<std::size_t>(range.end(), (row + 1) * static_cast<std::size_t>(dims[2]));
-        const int lx = static_cast<int>(row / static_cast<std::size_t>(dims[1])), ly = static_cast<int>(row % static_cast<std::size_t>(dims[1]));
-        blocks({lx, ly, lz0}, {lx + 1, ly + 1, lz0 + static_cast<int>(end - i)}, acc, b);
-        i = end;
-      }
-    });
-    return;
-  }
-  // Groups: the lattice cut by the grid's 128^3 nodes (16^3 blocks each, as
-  // the lattice's blocks are the grid's leaves).
+  // By groups (also without `group`, then all visited): the lattice cut
+  // by the grid's 128^3 nodes (16^3 blocks each, as the lattice's blocks
+  // are the grid's leaves).
   std::array<int, 3> gdims{}, g0{};
   for (int k = 0; k < 3; ++k) {
     // Lattice block l starts at index first[k] + 8 l; its node is floor of that / 128.
@@ -1931,7 +1915,7 @@ void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn,
       const Vec3 c = m.origin + m.h * Vec3(vox.max().x(), vox.max().y(), vox.max().z());
       g.centre = 0.5 * (a + c);
       g.radius = 0.5 * (c - a).norm() * (1 + 1e-12) + 1e-12;
-      if (values) {
+      if (group && values) {
         using Node1 = openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType;  // 128^3
         const auto* n1 = acc.template probeConstNode<Node1>(node);
         if (!n1) {
@@ -1947,7 +1931,7 @@ void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn,
             }
         }
       }
-      if (!group(g)) continue;
+      if (group && !group(g)) continue;
       blocks(g.lo, g.hi, acc, b);
     }
   });
