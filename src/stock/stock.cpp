@@ -189,17 +189,16 @@ void for_each_tile(const openvdb::FloatTree& tree, Keep keep, Fn fn) {
   }
 }
 
-// Whether the tree has a leaf at a leaf's origin, and else the tile value
-// there, read from the 16^3 node's tables without touching the leaf: a
-// ValueAccessor's probeConstLeaf caches the leaf's buffer pointer, which
-// reads the leaf node, a cache miss for each leaf where only its presence
-// is asked (the blade's binning: half of its own time). Keeps the last
-// 128^3 node.
-class LeafPresence {
+// The leaf at a leaf's origin, or null and the tile value there, read from
+// the 16^3 node's tables without touching the leaf: a ValueAccessor's
+// probeConstLeaf caches the leaf's buffer pointer, which reads the leaf
+// node, a cache miss for each leaf where only its presence is asked (the
+// blade's binning: half of its own time). Keeps the last 128^3 node.
+class LeafLookup {
  public:
   using Node1 = openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType;
-  explicit LeafPresence(const openvdb::FloatTree& tree) : tree_(tree) {}
-  bool has_leaf(const Coord& o, float* tile) {
+  explicit LeafLookup(const openvdb::FloatTree& tree) : tree_(tree) {}
+  const LeafT* leaf(const Coord& o, float* tile) {
     const Coord n1(o.x() & ~(kNode1Dim - 1), o.y() & ~(kNode1Dim - 1), o.z() & ~(kNode1Dim - 1));
     if (n1 != origin_) {
       origin_ = n1;
@@ -208,12 +207,12 @@ class LeafPresence {
     }
     if (!node_) {
       *tile = value_;
-      return false;
+      return nullptr;
     }
     const openvdb::Index i = Node1::coordToOffset(o);
-    if (node_->isChildMaskOn(i)) return true;
+    if (node_->isChildMaskOn(i)) return node_->getTable()[i].getChild();
     *tile = node_->getTable()[i].getValue();
-    return false;
+    return nullptr;
   }
 
  private:
@@ -222,7 +221,7 @@ class LeafPresence {
   const Node1* node_ = nullptr;
   float value_ = 0;
 };
-static_assert(LeafPresence::Node1::DIM == kNode1Dim, "the tree's 128^3 nodes");
+static_assert(LeafLookup::Node1::DIM == kNode1Dim, "the tree's 128^3 nodes");
 
 }  // namespace
 
@@ -967,6 +966,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
     };
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ng), [&](const auto& r) {
       if (interrupted()) return;
+      LeafLookup presence(tree);
       std::uint64_t band = 0;  // (measure_band_every)
       for (std::size_t gi = r.begin(); gi != r.end(); ++gi) {
         if (interrupted()) return;
@@ -977,8 +977,9 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
           continue;
         }
         // An air tile (step 1b's blocks) stays air: no distances either.
-        const LeafT* leaf = tree.probeConstLeaf(o);
-        if (!leaf && tree.getValue(o) > 0) continue;
+        float tile = 0;
+        const LeafT* leaf = presence.leaf(o, &tile);
+        if (!leaf && tile > 0) continue;
         const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
         const bool whole = m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
         double d = std::numeric_limits<double>::infinity();
@@ -999,10 +1000,10 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
         }
         // Only d(p) < -v(p) changes a voxel, and d(p) >= d - hd0 outside the
         // cut: a leaf whose deepest material is shallower than that stays.
-        const double vmin = leaf ? leaf_min(leaf->buffer().data()) : tree.getValue(o);
+        const double vmin = leaf ? leaf_min(leaf->buffer().data()) : tile;
         if (d - hd0 >= std::max(-vmin, 0.0)) continue;
         action[gi] = update;
-        if (!leaf) fresh[gi] = std::make_unique<LeafT>(o, tree.getValue(o), false);  // tiles are inactive
+        if (!leaf) fresh[gi] = std::make_unique<LeafT>(o, tile, false);  // tiles are inactive
       }
       if (band) m.band_voxels.fetch_add(band, std::memory_order_relaxed);
     });
@@ -1546,7 +1547,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
       // tiles, and leaves beyond the piece's reach. A long tool's piece
       // (a 3 mm flute on a tilted axis) has its box mostly in air or far
       // from its slanted core.
-      LeafPresence presence(tree);
+      LeafLookup presence(tree);
       // The piece's least distance at the voxels of a cube about c (half
       // diagonal hd), `d` its distance at c: d - hd (outside, where it is
       // exact; the tests below use it only above 0), and for a torus on its
@@ -1569,7 +1570,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
       };
       auto leaf = [&](const Coord& o) {
         float tile_value = 0;
-        const bool lf = presence.has_leaf(o, &tile_value);
+        const LeafT* lf = presence.leaf(o, &tile_value);
         if (!lf && tile_value > 0) return;  // air tile
         const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
         double d = 0;
