@@ -1095,6 +1095,9 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
       };
       std::vector<Run> runs;
       if (interrupted()) return;  // the run is abandoned; stop quickly
+      // (Counted per range: an atomic add per leaf bounced its cache line
+      // between the threads.)
+      std::uint64_t evaluated = 0, quarter_aired = 0;
       for (std::size_t i = r.begin(); i != r.end(); ++i) {
         if (interrupted()) return;
         LeafT* leaf = leaves[i];
@@ -1149,7 +1152,6 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
         float* data = leaf->buffer().data();
         auto& mask = leaf->getValueMask();
         bool air = true;
-        std::uint64_t evaluated = 0, quarter_aired = 0;
         // Calls fn(index, place in the quarter, value, centre) for each voxel
         // of the quarter at (bx, by, bz) that holds material, within the ROI.
         auto material_voxels = [&](int bx, int by, int bz, auto&& fn) {
@@ -1493,9 +1495,9 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
           });
         }
         tiled[i] = air ? kAir : leaf_state(data);
-        m.voxel_evaluations.fetch_add(evaluated, std::memory_order_relaxed);
-        m.voxels_aired.fetch_add(quarter_aired, std::memory_order_relaxed);
       }
+      m.voxel_evaluations.fetch_add(evaluated, std::memory_order_relaxed);
+      m.voxels_aired.fetch_add(quarter_aired, std::memory_order_relaxed);
     });
     if (m.planes_on) {  // the leaves as the update left them
       std::vector<Impl::LeafPlanes> planes(leaves.size());
