@@ -350,7 +350,7 @@ void Stock::Impl::refresh_occupancy(std::vector<Coord> blocks) {
   constexpr int kDim = 1 << kBlockLog2;
   std::vector<char> emptied(blocks.size(), 0);
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 64), [&](const auto& r) {
-    openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(grid->tree());
+    LeafLookup lookup(grid->tree());
     for (std::size_t j = r.begin(); j != r.end(); ++j) {
       const Coord& b = blocks[j];
       const std::int64_t i = occ.index(b);
@@ -359,8 +359,8 @@ void Stock::Impl::refresh_occupancy(std::vector<Coord> blocks) {
       for (int lx = 0; lx < kDim && !material; lx += kLeafDim)
         for (int ly = 0; ly < kDim && !material; ly += kLeafDim)
           for (int lz = 0; lz < kDim && !material; lz += kLeafDim) {
-            const Coord o = b.offsetBy(lx, ly, lz);
-            material = acc.probeConstLeaf(o) || acc.getValue(o) <= 0;
+            float tile = 0;
+            material = lookup.leaf(b.offsetBy(lx, ly, lz), &tile) || tile <= 0;
           }
       emptied[j] = !material;
     }
@@ -966,7 +966,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
     };
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, ng), [&](const auto& r) {
       if (interrupted()) return;
-      LeafLookup presence(tree);
+      LeafLookup lookup(tree);
       std::uint64_t band = 0;  // (measure_band_every)
       for (std::size_t gi = r.begin(); gi != r.end(); ++gi) {
         if (interrupted()) return;
@@ -978,7 +978,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
         }
         // An air tile (step 1b's blocks) stays air: no distances either.
         float tile = 0;
-        const LeafT* leaf = presence.leaf(o, &tile);
+        const LeafT* leaf = lookup.leaf(o, &tile);
         if (!leaf && tile > 0) continue;
         const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
         const bool whole = m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
@@ -1549,7 +1549,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
       // tiles, and leaves beyond the piece's reach. A long tool's piece
       // (a 3 mm flute on a tilted axis) has its box mostly in air or far
       // from its slanted core.
-      LeafLookup presence(tree);
+      LeafLookup lookup(tree);
       // The piece's least distance at the voxels of a cube about c (half
       // diagonal hd), `d` its distance at c: d - hd (outside, where it is
       // exact; the tests below use it only above 0), and for a torus on its
@@ -1572,7 +1572,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
       };
       auto leaf = [&](const Coord& o) {
         float tile_value = 0;
-        const LeafT* lf = presence.leaf(o, &tile_value);
+        const LeafT* lf = lookup.leaf(o, &tile_value);
         if (!lf && tile_value > 0) return;  // air tile
         const Vec3 c0 = m.origin + h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
         double d = 0;
