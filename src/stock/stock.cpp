@@ -1669,7 +1669,6 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   constexpr double kPlaneMargin = 1e-12;  // mm
   const bool plane = static_cast<bool>(region_plane);
   const auto& tree = m.grid->tree();
-  using Node1T = openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType;
   // The blocks listed and not yet scanned, and the place of the first of
   // them in the listing's order.
   std::vector<std::pair<Coord, double>> blocks;
@@ -1689,12 +1688,13 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   auto scan = [&](std::size_t i0, std::size_t i1, double floor0) {
     Overlap local;
     std::size_t local_block = 0;
+    LeafLookup lookup(tree);
     for (std::size_t i = i0; i != i1 && base + i < first_saturated.load(std::memory_order_relaxed); ++i) {
       const Coord o = blocks[i].first;
       const double rc = blocks[i].second;
-      const LeafT* leaf = tree.probeConstLeaf(o);
+      float tile = 0;
+      const LeafT* leaf = lookup.leaf(o, &tile);
       const float* data = leaf ? leaf->buffer().data() : nullptr;
-      const float tile = leaf ? 0.0f : tree.getValue(o);
       double floor = std::max(floor0, local.depth_mm);
       if (-rc + hd0 <= floor) continue;
       if (!data && -static_cast<double>(tile) <= floor) continue;
@@ -1808,11 +1808,9 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
   };
   // Blocks the region can reach (its distance is a lower bound outside),
   // skipping air tiles; with the region's distance at their centre.
-  // Air is tested first, on the 128^3 node that holds the leaf (most of a
-  // tool's body is over air that earlier cuts left).
-  const Node1T* node = nullptr;
-  Coord node_origin(std::numeric_limits<int>::max());
-  bool node_air = false;
+  // Air is tested first, from the node tables (most of a tool's body is
+  // over air that earlier cuts left).
+  LeafLookup lookup(tree);
   for_each_leaf_block(m.origin, m.h, bb,
                       [&](const Vec3& c, double hd, const Coord& bo, int dim) {
                         return !stop && (dim != kMid || m.may_hold_material(bo)) &&
@@ -1820,14 +1818,8 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
                       },
                       [&](const Coord& o) {
                         if (stop) return;
-                        const Coord n1(o.x() & ~(kNode1Dim - 1), o.y() & ~(kNode1Dim - 1), o.z() & ~(kNode1Dim - 1));
-                        if (n1 != node_origin) {
-                          node_origin = n1;
-                          node = tree.probeConstNode<Node1T>(n1);
-                          node_air = !node && tree.getValue(n1) > 0;
-                        }
-                        if (node_air) return;
-                        if (node && !node->probeConstLeaf(o) && node->getValue(o) > 0) return;  // air tile
+                        float tile = 0;
+                        if (!lookup.leaf(o, &tile) && tile > 0) return;  // air tile
                         const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
                         const double rc = region(c0);
                         if (rc > hd0 - min_depth_mm) return;
