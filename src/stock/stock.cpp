@@ -27,6 +27,10 @@ namespace {
 
 constexpr int kLeafDim = 8;
 constexpr int kNode1Dim = 128;
+// The tree's internal nodes: 4096^3 voxels (Node2T) and 128^3 (Node1T).
+using Node2T = openvdb::FloatTree::RootNodeType::ChildNodeType;
+using Node1T = Node2T::ChildNodeType;
+static_assert(Node1T::DIM == kNode1Dim && LeafT::DIM == kLeafDim, "the tree's 128^3 nodes and 8^3 leaves");
 
 std::once_flag g_init;
 
@@ -167,22 +171,20 @@ void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep
 // has half a million entries, nearly all of them background.
 template <class Keep, class Fn>
 void for_each_tile(const openvdb::FloatTree& tree, Keep keep, Fn fn) {
-  using Node2 = openvdb::FloatTree::RootNodeType::ChildNodeType;
-  using Node1 = Node2::ChildNodeType;
   const auto& root = tree.root();
   for (auto it = root.cbeginValueAll(); it; ++it)
-    if (keep(*it)) fn(CoordBBox::createCube(it.getCoord(), Node2::DIM));
+    if (keep(*it)) fn(CoordBBox::createCube(it.getCoord(), Node2T::DIM));
   for (auto c2 = root.cbeginChildOn(); c2; ++c2) {
-    const Node2& n2 = *c2;
+    const Node2T& n2 = *c2;
     const auto* t2 = n2.getTable();
-    for (openvdb::Index i = 0; i < Node2::NUM_VALUES; ++i) {
+    for (openvdb::Index i = 0; i < Node2T::NUM_VALUES; ++i) {
       if (!n2.getChildMask().isOn(i)) {
-        if (keep(t2[i].getValue())) fn(CoordBBox::createCube(n2.offsetToGlobalCoord(i), Node1::DIM));
+        if (keep(t2[i].getValue())) fn(CoordBBox::createCube(n2.offsetToGlobalCoord(i), Node1T::DIM));
         continue;
       }
-      const Node1& n1 = *t2[i].getChild();
+      const Node1T& n1 = *t2[i].getChild();
       const auto* t1 = n1.getTable();
-      for (openvdb::Index j = 0; j < Node1::NUM_VALUES; ++j)
+      for (openvdb::Index j = 0; j < Node1T::NUM_VALUES; ++j)
         if (!n1.getChildMask().isOn(j) && keep(t1[j].getValue()))
           fn(CoordBBox::createCube(n1.offsetToGlobalCoord(j), kLeafDim));
     }
@@ -196,20 +198,19 @@ void for_each_tile(const openvdb::FloatTree& tree, Keep keep, Fn fn) {
 // blade's binning: half of its own time). Keeps the last 128^3 node.
 class LeafLookup {
  public:
-  using Node1 = openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType;
   explicit LeafLookup(const openvdb::FloatTree& tree) : tree_(tree) {}
   const LeafT* leaf(const Coord& o, float* tile) {
     const Coord n1(o.x() & ~(kNode1Dim - 1), o.y() & ~(kNode1Dim - 1), o.z() & ~(kNode1Dim - 1));
     if (n1 != origin_) {
       origin_ = n1;
-      node_ = tree_.probeConstNode<Node1>(n1);
+      node_ = tree_.probeConstNode<Node1T>(n1);
       if (!node_) value_ = tree_.getValue(n1);  // one tile above the node's level
     }
     if (!node_) {
       *tile = value_;
       return nullptr;
     }
-    const openvdb::Index i = Node1::coordToOffset(o);
+    const openvdb::Index i = Node1T::coordToOffset(o);
     if (node_->isChildMaskOn(i)) return node_->getTable()[i].getChild();
     *tile = node_->getTable()[i].getValue();
     return nullptr;
@@ -218,10 +219,9 @@ class LeafLookup {
  private:
   const openvdb::FloatTree& tree_;
   Coord origin_{std::numeric_limits<int>::max()};
-  const Node1* node_ = nullptr;
+  const Node1T* node_ = nullptr;
   float value_ = 0;
 };
-static_assert(LeafLookup::Node1::DIM == kNode1Dim, "the tree's 128^3 nodes");
 
 }  // namespace
 
@@ -1947,8 +1947,7 @@ void Stock::for_each_roi_block(const std::function<void(const VoxelBlock&)>& fn,
       g.centre = 0.5 * (a + c);
       g.radius = 0.5 * (c - a).norm() * (1 + 1e-12) + 1e-12;
       if (group && values) {
-        using Node1 = openvdb::FloatTree::RootNodeType::ChildNodeType::ChildNodeType;  // 128^3
-        const auto* n1 = acc.template probeConstNode<Node1>(node);
+        const auto* n1 = acc.template probeConstNode<Node1T>(node);
         if (!n1) {
           g.uniform = true;
           g.value = acc.getValue(node);
