@@ -66,6 +66,7 @@ void keep_freed_memory() {
   if (kSanitized) return;
   ::mallopt(M_MMAP_THRESHOLD, 32 << 20);  // (glibc's largest)
   ::mallopt(M_TRIM_THRESHOLD, INT_MAX);
+  ::mallopt(M_TOP_PAD, 64 << 20);
 }
 
 void reexec_with_huge_pages(char** argv) {
