@@ -764,7 +764,12 @@ constexpr std::int64_t kListLeaves = 4096;
 // Pieces binned per parallel chunk, at most: a chunk is sized from the
 // pairs per piece so far, so large pieces after small ones (roughing at
 // 1 um: ~450k pairs each) bin at most this many before the budget is seen.
+// Past that, only while the leaves of the further pieces' boxes (more
+// than they can bin) fit in the room left, up to kBinChunkMax: a chunk is
+// a parallel loop of its own, and raster40k's 0.5 mm moves came 64 to a
+// loop, some 600 loops (its binning 0.10 -> 0.08 s in 4096s).
 constexpr std::size_t kBinChunk = 64;
+constexpr std::size_t kBinChunkMax = 4096;
 
 // Drops from `sub` (key, index) the pieces that no voxel within `hw` (per
 // axis) of `c` can have strictly nearer than the one of least key. That
@@ -1530,20 +1535,31 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
   // reaches some 450k leaves). Where a batch is split follows the counts
   // only, so runs repeat exactly; the union removed does not depend on it.
   std::vector<std::vector<std::uint64_t>> per_prim(prims.size());
+  // A piece's voxel box (grown by the band where it reaches out) in the
+  // ROI, and the leaves it spans: no more than it can bin.
+  auto piece_box = [&](const sweep::Primitive& p) {
+    // (A piece whose inside only matters reaches no farther than its box.)
+    const double reach = sweep::interior_only(p) ? 0.0 : g;
+    const Aabb wb = sweep::bounds(p).expanded(reach + h);
+    CoordBBox bb(floor_coord((wb.min - m.origin) / h), ceil_coord((wb.max - m.origin) / h));
+    bb.intersect(m.roi_index);
+    return bb;
+  };
+  auto box_leaves = [](const CoordBBox& bb) -> std::int64_t {
+    if (bb.empty()) return 0;
+    return std::int64_t((bb.max().x() >> 3) - (bb.min().x() >> 3) + 1) * ((bb.max().y() >> 3) - (bb.min().y() >> 3) + 1) *
+           ((bb.max().z() >> 3) - (bb.min().z() >> 3) + 1);
+  };
   auto bin = [&](const tbb::blocked_range<std::size_t>& r) {
     for (std::size_t i = r.begin(); i != r.end(); ++i) {
       if (interrupted()) return;  // abandoned: the caller throws
       const sweep::Primitive& p = *prims[i];
-      // (A piece whose inside only matters reaches no farther than its box.)
       const double reach = sweep::interior_only(p) ? 0.0 : g;
-      const Aabb wb = sweep::bounds(p).expanded(reach + h);
-      CoordBBox bb(floor_coord((wb.min - m.origin) / h), ceil_coord((wb.max - m.origin) / h));
-      bb.intersect(m.roi_index);
+      const CoordBBox bb = piece_box(p);
       if (bb.empty()) continue;
       auto& out = per_prim[i];
       const auto id = static_cast<std::uint32_t>(i);
-      const std::int64_t nl = std::int64_t((bb.max().x() >> 3) - (bb.min().x() >> 3) + 1) *
-                              ((bb.max().y() >> 3) - (bb.min().y() >> 3) + 1) * ((bb.max().z() >> 3) - (bb.min().z() >> 3) + 1);
+      const std::int64_t nl = box_leaves(bb);
       // Only the leaves step 2 would not pass over (the same test on the
       // same value), so they are neither sorted nor visited again: air
       // tiles, and leaves beyond the piece's reach. A long tool's piece
@@ -1628,7 +1644,12 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
     // Chunks sized from the pairs per piece so far, to stop near the budget.
     const std::size_t per = c0 > 0 ? std::max<std::size_t>(1, pairs_total / c0) : std::max<std::size_t>(1, m.max_pairs / 8);
     const std::size_t room = m.max_pairs > binned ? m.max_pairs - binned : 1;
-    const std::size_t c1 = std::min(prims.size(), c0 + std::clamp<std::size_t>(room / per, 1, kBinChunk));
+    const std::size_t want = std::min(prims.size(), c0 + std::clamp<std::size_t>(room / per, 1, kBinChunkMax));
+    std::size_t c1 = std::min(want, c0 + std::clamp<std::size_t>(room / per, 1, kBinChunk));
+    for (std::size_t boxed = 0; c1 < want; ++c1) {
+      boxed += static_cast<std::size_t>(box_leaves(piece_box(*prims[c1])));
+      if (boxed > room) break;
+    }
     tbb::parallel_for(tbb::blocked_range<std::size_t>(c0, c1), bin);
     if (interrupted()) return;  // abandoned: the caller throws
     std::size_t chunk_pairs = 0;
