@@ -12,6 +12,9 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <unistd.h>
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 #include "cutsim/core/error.h"
 #include "cutsim/core/interrupt.h"
@@ -757,6 +760,59 @@ std::uint64_t near_voxels(const Stock::Impl& m, const CoordBBox& box, const std:
   return count;
 }
 
+// A convex piece's tangent plane at a quarter's centre, c + g . y.
+struct CentrePlane {
+  double c, gx, gy, gz;
+};
+
+// The voxels b < n (bits) of a quarter whose nearest distance so far d[b]
+// is above `floor` and where the plane lies below min(d[b], need[b]): those
+// the piece may lower. The planes are summed as Eigen's dot does, so both
+// versions give the same bits. Scalar, it was a third of raster40k's voxel
+// step (a loop over 41 voxels for each of 7 pieces a quarter): AVX2 takes
+// four at a time where the CPU has it.
+std::uint64_t planes_below_scalar(const double* d, const double* need, const double* yx, const double* yy,
+                                  const double* yz, int from, int n, const CentrePlane& pl, double floor) {
+  std::uint64_t bits = 0;
+  for (int b = from; b < n; ++b) {
+    const double lim = std::min(d[b], need[b]);
+    const bool below = d[b] > floor && pl.c + (pl.gx * yx[b] + pl.gy * yy[b] + pl.gz * yz[b]) < lim;
+    bits |= std::uint64_t(below) << b;
+  }
+  return bits;
+}
+
+#if defined(__x86_64__)
+// (No FMA: the target adds none, so the products round as above.)
+[[gnu::target("avx2")]] std::uint64_t planes_below_avx2(const double* d, const double* need, const double* yx,
+                                                         const double* yy, const double* yz, int n, const CentrePlane& pl,
+                                                         double floor) {
+  const __m256d c = _mm256_set1_pd(pl.c), gx = _mm256_set1_pd(pl.gx), gy = _mm256_set1_pd(pl.gy),
+                gz = _mm256_set1_pd(pl.gz), fl = _mm256_set1_pd(floor);
+  std::uint64_t bits = 0;
+  int b = 0;
+  for (; b + 4 <= n; b += 4) {
+    const __m256d db = _mm256_loadu_pd(d + b);
+    // min(need, d): need where it is less, else d (std::min(d, need)).
+    const __m256d lim = _mm256_min_pd(_mm256_loadu_pd(need + b), db);
+    __m256d t = _mm256_add_pd(_mm256_mul_pd(gx, _mm256_loadu_pd(yx + b)), _mm256_mul_pd(gy, _mm256_loadu_pd(yy + b)));
+    t = _mm256_add_pd(c, _mm256_add_pd(t, _mm256_mul_pd(gz, _mm256_loadu_pd(yz + b))));
+    const __m256d below = _mm256_and_pd(_mm256_cmp_pd(db, fl, _CMP_GT_OQ), _mm256_cmp_pd(t, lim, _CMP_LT_OQ));
+    bits |= static_cast<std::uint64_t>(_mm256_movemask_pd(below)) << b;
+  }
+  return bits | planes_below_scalar(d, need, yx, yy, yz, b, n, pl, floor);
+}
+#endif
+
+std::uint64_t planes_below(const double* d, const double* need, const double* yx, const double* yy, const double* yz,
+                           int n, const CentrePlane& pl, double floor) {
+#if defined(__x86_64__)
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  if (avx2) return planes_below_avx2(d, need, yx, yy, yz, n, pl, floor);
+#endif
+  return planes_below_scalar(d, need, yx, yy, yz, 0, n, pl, floor);
+}
+
 // Leaves above this count in a piece's box are culled block by block on
 // the piece's distance instead of listed whole.
 constexpr std::int64_t kListLeaves = 4096;
@@ -1325,7 +1381,6 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
               bars.p[b] = p;
             });
             evaluated += static_cast<std::uint64_t>(nb);
-            std::array<int, 64> pass;  // the bars a piece's plane leaves below
             for (const auto& [key, k] : sub) {
               const sweep::Primitive& pk = *cand[k];
               const Aabb& bk = cbox[k];
@@ -1351,16 +1406,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
                 if constexpr (plane) {
                   static_assert(!inner, "a joint has no plane");
                   const double ck = seed_d[k], gx = cgrad[k].x(), gy = cgrad[k].y(), gz = cgrad[k].z();
-                  int np = 0;
-                  for (int b = 0; b < nb; ++b) {
-                    const double lim = std::min(bars.d[b], bars.need[b]);
-                    // (ck + g . y, summed as Eigen's dot does; -g: clamped to air whatever the rest)
-                    const bool below = bars.d[b] > -g && ck + (gx * bars.yx[b] + gy * bars.yy[b] + gz * bars.yz[b]) < lim;
-                    pass[static_cast<std::size_t>(np)] = b;
-                    np += below;
-                  }
-                  for (int j = 0; j < np; ++j) {
-                    const auto b = static_cast<std::size_t>(pass[static_cast<std::size_t>(j)]);
+                  // (-g: clamped to air whatever the rest)
+                  for (std::uint64_t below = planes_below(bars.d.data(), bars.need.data(), bars.yx.data(), bars.yy.data(),
+                                                          bars.yz.data(), nb, {ck, gx, gy, gz}, -g);
+                       below != 0; below &= below - 1) {
+                    const auto b = static_cast<std::size_t>(std::countr_zero(below));
                     at_voxel(b, std::min(bars.d[b], bars.need[b]));
                   }
                 } else {
