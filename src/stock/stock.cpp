@@ -900,19 +900,22 @@ struct Off4 {
       const __m256d inside =
           _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(s, zero, _CMP_GE_OQ), _mm256_cmp_pd(s, one, _CMP_LE_OQ)),
                         _mm256_and_pd(_mm256_cmp_pd(t, zero, _CMP_GE_OQ), _mm256_cmp_pd(t, one, _CMP_LE_OQ)));
-      const __m256d k = _mm256_mul_pd(_mm256_sub_pd(_mm256_mul_pd(p.x, vdy), _mm256_mul_pd(p.y, vdx)), _mm256_set1_pd(lp.inv_r2));
-      const __m256d kx = _mm256_mul_pd(k, vdy), ky = _mm256_mul_pd(k, vdx);  // the offset (k dy, -k dx, 0)
-      const __m256d in2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(kx, kx), _mm256_mul_pd(ky, ky)), zero);
-      // Outside: the least over the edges that count (the others: infinity).
-      const __m256d inf = _mm256_set1_pd(std::numeric_limits<double>::infinity());  // (edges that do not count)
-      __m256d best = inf;
-      best = take_less_avx2(best, t_lo, seg_offset_inv2_avx2(p, 0, 0, 0, dx, dy, dz, lp.inv_dd));
-      best = take_less_avx2(best, t_hi, seg_offset_inv2_avx2(p, 0, 0, L, dx, dy, dz, lp.inv_dd));
-      best = take_less_avx2(best, _mm256_andnot_pd(_mm256_and_pd(t_lo, _mm256_cmp_pd(p.z, zero, _CMP_LE_OQ)), s_lo),
-                  seg_offset_inv2_avx2(p, 0, 0, 0, 0, 0, L, lp.inv_ll));
-      best = take_less_avx2(best, _mm256_andnot_pd(_mm256_and_pd(t_lo, _mm256_cmp_pd(p.z, _mm256_set1_pd(dz), _CMP_LE_OQ)), s_hi),
-                  seg_offset_inv2_avx2(p, dx, dy, dz, 0, 0, L, lp.inv_ll));
-      n2 = _mm256_blendv_pd(best, in2, inside);
+      // Outside: the least over the edges that count (the others: infinity),
+      // each edge worked out only where some point needs it (below a ball
+      // end's centre, where it cuts, only the bottom edge).
+      const __m256d c3 = _mm256_andnot_pd(_mm256_and_pd(t_lo, _mm256_cmp_pd(p.z, zero, _CMP_LE_OQ)), s_lo);
+      const __m256d c4 = _mm256_andnot_pd(_mm256_and_pd(t_lo, _mm256_cmp_pd(p.z, _mm256_set1_pd(dz), _CMP_LE_OQ)), s_hi);
+      __m256d best = _mm256_set1_pd(std::numeric_limits<double>::infinity());
+      if (_mm256_movemask_pd(t_lo)) best = take_less_avx2(best, t_lo, seg_offset_inv2_avx2(p, 0, 0, 0, dx, dy, dz, lp.inv_dd));
+      if (_mm256_movemask_pd(t_hi)) best = take_less_avx2(best, t_hi, seg_offset_inv2_avx2(p, 0, 0, L, dx, dy, dz, lp.inv_dd));
+      if (_mm256_movemask_pd(c3)) best = take_less_avx2(best, c3, seg_offset_inv2_avx2(p, 0, 0, 0, 0, 0, L, lp.inv_ll));
+      if (_mm256_movemask_pd(c4)) best = take_less_avx2(best, c4, seg_offset_inv2_avx2(p, dx, dy, dz, 0, 0, L, lp.inv_ll));
+      n2 = best;
+      if (_mm256_movemask_pd(inside)) {
+        const __m256d k = _mm256_mul_pd(_mm256_sub_pd(_mm256_mul_pd(p.x, vdy), _mm256_mul_pd(p.y, vdx)), _mm256_set1_pd(lp.inv_r2));
+        const __m256d kx = _mm256_mul_pd(k, vdy), ky = _mm256_mul_pd(k, vdx);  // the offset (k dy, -k dx, 0)
+        n2 = _mm256_blendv_pd(n2, _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(kx, kx), _mm256_mul_pd(ky, ky)), zero), inside);
+      }
     }
     std::array<double, 4> dist;
     _mm256_storeu_pd(dist.data(), _mm256_sub_pd(_mm256_sqrt_pd(n2), _mm256_set1_pd(lp.env.corner_radius)));
