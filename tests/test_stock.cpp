@@ -2,11 +2,18 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
+#include <variant>
 
+#include "cutsim/sweep/sweep.h"
+#include "cutsim/tool/tool.h"
 #include "stock_impl.h"
+#include "voxel_kernels.h"
 
 namespace cutsim::test {
 namespace {
@@ -81,4 +88,98 @@ TEST(Stock, LeafPlanesSeeAFlatFloorUnderAToolAbove) {
 }
 
 }  // namespace
+
+// The voxel step's four-wide loops (voxel_kernels.h) against their
+// portable versions: the same bits, as the stock update's results depend on
+// them to the last digit. (Skipped where the CPU lacks AVX2: the portable
+// versions then run.)
+TEST(VoxelKernels, PlaneTestGivesThePortableBits) {
+  if (!stock::detail::avx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int tested = 0, set = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    const int n = static_cast<int>(rng() % 65);
+    std::array<double, 64> d{}, need{}, yx{}, yy{}, yz{};
+    for (int b = 0; b < n; ++b) {
+      // Some voxels not yet reached (infinity), some at or below the floor,
+      // some whose distance so far is their need exactly.
+      need[b] = 0.03 * u(rng);
+      switch (rng() % 5) {
+        case 0: d[b] = std::numeric_limits<double>::infinity(); break;
+        case 1: d[b] = -0.03; break;
+        case 2: d[b] = need[b]; break;
+        default: d[b] = 0.05 * u(rng);
+      }
+      yx[b] = 0.015 * ((b >> 4) - 1.5);
+      yy[b] = 0.015 * (((b >> 2) & 3) - 1.5);
+      yz[b] = 0.015 * ((b & 3) - 1.5);
+    }
+    const stock::detail::CentrePlane pl{0.02 * u(rng), u(rng), u(rng), u(rng)};
+    const std::uint64_t portable =
+        stock::detail::planes_below_scalar(d.data(), need.data(), yx.data(), yy.data(), yz.data(), 0, n, pl, -0.03);
+    const std::uint64_t wide =
+        stock::detail::planes_below_avx2(d.data(), need.data(), yx.data(), yy.data(), yz.data(), n, pl, -0.03);
+    ASSERT_EQ(portable, wide) << "trial " << trial << ", n " << n;
+    ++tested;
+    set += std::popcount(portable);
+  }
+  EXPECT_EQ(tested, 2000);
+  EXPECT_GT(set, 5000);  // the tests pass some voxels and not others
+}
+
+TEST(VoxelKernels, BallLineDistancesGiveThePortableBits) {
+  if (!stock::detail::avx2()) GTEST_SKIP() << "no AVX2 on this CPU";
+  const tool::Tool ball = tool::parse_tool_spec("ball:d=4");
+  const Eigen::Matrix3d tilted = Eigen::AngleAxisd(0.3, Vec3(1, 0.2, 0).normalized()).toRotationMatrix();
+  struct Move {
+    Vec3 a, b;
+    Eigen::Matrix3d r;
+  };
+  // Level (raster40k's), sloped, a plunge (the vertical case), a climb,
+  // and the same on a tilted axis (no longer the identity frame).
+  const std::vector<Move> moves = {
+      {{0, 0, 0}, {0.5, 0, 0}, Eigen::Matrix3d::Identity()},   {{0, 0, 0}, {0.3, 0.2, -0.1}, Eigen::Matrix3d::Identity()},
+      {{0, 0, 1}, {0, 0, 0}, Eigen::Matrix3d::Identity()},     {{0, 0, 0}, {-0.2, 0.1, 0.4}, Eigen::Matrix3d::Identity()},
+      {{0, 0, 0}, {0.5, 0.1, -0.05}, tilted},                  {{0, 0, 1}, {0, 0, 0}, tilted}};
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  int vertical = 0, parallelogram = 0, framed = 0, lowered = 0;
+  for (const Move& mv : moves) {
+    const sweep::Sweep sw = sweep::sweep_line(mv.a, mv.b, mv.r, ball);
+    for (const sweep::Primitive& piece : sw.prims) {
+      const auto* lp = std::get_if<sweep::LinearPrim>(&piece);
+      if (!lp || lp->env.disk_radius != 0) continue;
+      (lp->kind == sweep::LinearPrim::Case::vertical ? vertical : parallelogram) += 1;
+      framed += !lp->axis_z;
+      const Aabb box = lp->bounds.expanded(0.5);
+      for (int trial = 0; trial < 400; ++trial) {
+        std::array<double, 64> px{}, py{}, pz{}, d{};
+        for (int b = 0; b < 64; ++b) {
+          px[b] = box.min.x() + u(rng) * (box.max.x() - box.min.x());
+          py[b] = box.min.y() + u(rng) * (box.max.y() - box.min.y());
+          pz[b] = box.min.z() + u(rng) * (box.max.z() - box.min.z());
+          d[b] = rng() % 3 == 0 ? std::numeric_limits<double>::infinity() : 2 * u(rng) - 1;
+        }
+        const std::uint64_t bits = rng() & rng();  // about a quarter of the voxels
+        std::array<double, 64> portable = d, wide = d;
+        stock::detail::lower_by_ball_line_scalar(*lp, bits, px.data(), py.data(), pz.data(), portable.data());
+        stock::detail::lower_by_ball_line_avx2(*lp, bits, px.data(), py.data(), pz.data(), wide.data());
+        ASSERT_EQ(0, std::memcmp(portable.data(), wide.data(), sizeof portable)) << "trial " << trial;
+        for (int b = 0; b < 64; ++b) {
+          // Only the voxels in `bits`, each to the least of its distance so far and the piece's.
+          const double want = (bits >> b) & 1 ? std::min(d[b], sweep::detail::ball_line_distance(*lp, Vec3(px[b], py[b], pz[b])))
+                                              : d[b];
+          ASSERT_EQ(want, portable[b]) << "voxel " << b;
+          lowered += portable[b] != d[b];
+        }
+      }
+    }
+  }
+  EXPECT_GT(vertical, 0);
+  EXPECT_GT(parallelogram, 0);
+  EXPECT_GT(framed, 0);
+  EXPECT_GT(lowered, 10000);
+}
+
 }  // namespace cutsim::test

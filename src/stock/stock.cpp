@@ -12,16 +12,17 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <unistd.h>
-#if defined(__x86_64__)
-#include <immintrin.h>
-#endif
 
 #include "cutsim/core/error.h"
 #include "cutsim/core/interrupt.h"
 #include "stock_impl.h"
+#include "voxel_kernels.h"
 
 namespace cutsim::stock {
 
+using detail::CentrePlane;
+using detail::lower_by_ball_line;
+using detail::planes_below;
 using openvdb::Coord;
 using openvdb::CoordBBox;
 using LeafT = openvdb::FloatTree::LeafNodeType;
@@ -758,180 +759,6 @@ std::uint64_t near_voxels(const Stock::Impl& m, const CoordBBox& box, const std:
         count += near_voxels(m, CoordBBox(a, b), pieces, g);
       }
   return count;
-}
-
-// A convex piece's tangent plane at a quarter's centre, c + g . y.
-struct CentrePlane {
-  double c, gx, gy, gz;
-};
-
-// The voxels b < n (bits) of a quarter whose nearest distance so far d[b]
-// is above `floor` and where the plane lies below min(d[b], need[b]): those
-// the piece may lower. The planes are summed as Eigen's dot does, so both
-// versions give the same bits. Scalar, it was a third of raster40k's voxel
-// step (a loop over 41 voxels for each of 7 pieces a quarter): AVX2 takes
-// four at a time where the CPU has it.
-std::uint64_t planes_below_scalar(const double* d, const double* need, const double* yx, const double* yy,
-                                  const double* yz, int from, int n, const CentrePlane& pl, double floor) {
-  std::uint64_t bits = 0;
-  for (int b = from; b < n; ++b) {
-    const double lim = std::min(d[b], need[b]);
-    const bool below = d[b] > floor && pl.c + (pl.gx * yx[b] + pl.gy * yy[b] + pl.gz * yz[b]) < lim;
-    bits |= std::uint64_t(below) << b;
-  }
-  return bits;
-}
-
-#if defined(__x86_64__)
-// (No FMA: the target adds none, so the products round as above.)
-[[gnu::target("avx2")]] std::uint64_t planes_below_avx2(const double* d, const double* need, const double* yx,
-                                                         const double* yy, const double* yz, int n, const CentrePlane& pl,
-                                                         double floor) {
-  const __m256d c = _mm256_set1_pd(pl.c), gx = _mm256_set1_pd(pl.gx), gy = _mm256_set1_pd(pl.gy),
-                gz = _mm256_set1_pd(pl.gz), fl = _mm256_set1_pd(floor);
-  std::uint64_t bits = 0;
-  int b = 0;
-  for (; b + 4 <= n; b += 4) {
-    const __m256d db = _mm256_loadu_pd(d + b);
-    // min(need, d): need where it is less, else d (std::min(d, need)).
-    const __m256d lim = _mm256_min_pd(_mm256_loadu_pd(need + b), db);
-    __m256d t = _mm256_add_pd(_mm256_mul_pd(gx, _mm256_loadu_pd(yx + b)), _mm256_mul_pd(gy, _mm256_loadu_pd(yy + b)));
-    t = _mm256_add_pd(c, _mm256_add_pd(t, _mm256_mul_pd(gz, _mm256_loadu_pd(yz + b))));
-    const __m256d below = _mm256_and_pd(_mm256_cmp_pd(db, fl, _CMP_GT_OQ), _mm256_cmp_pd(t, lim, _CMP_LT_OQ));
-    bits |= static_cast<std::uint64_t>(_mm256_movemask_pd(below)) << b;
-  }
-  return bits | planes_below_scalar(d, need, yx, yy, yz, b, n, pl, floor);
-}
-#endif
-
-std::uint64_t planes_below(const double* d, const double* need, const double* yx, const double* yy, const double* yz,
-                           int n, const CentrePlane& pl, double floor) {
-#if defined(__x86_64__)
-  static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2) return planes_below_avx2(d, need, yx, yy, yz, n, pl, floor);
-#endif
-  return planes_below_scalar(d, need, yx, yy, yz, 0, n, pl, floor);
-}
-
-// A ball end's line (sweep::detail::ball_line_distance) lowering the
-// nearest distance so far, d[b] = min(d[b], distance at (px, py, pz)[b]),
-// at the bars in `bits`. With AVX2, four at a time: every case of the
-// parallelogram worked out and the right one picked, in the scalar
-// version's operations (no FMA), so each distance is the same to the bit.
-// (The distances were a third of raster40k's voxel step.)
-void lower_by_ball_line_scalar(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
-                               const double* pz, double* d) {
-  for (; bits != 0; bits &= bits - 1) {
-    const auto b = static_cast<std::size_t>(std::countr_zero(bits));
-    d[b] = std::min(d[b], sweep::detail::ball_line_distance(lp, Vec3(px[b], py[b], pz[b])));
-  }
-}
-
-#if defined(__x86_64__)
-struct Off4 {
-  __m256d x, y, z;
-};
-
-// sweep::detail::seg_offset_inv's squared length, on four points.
-[[gnu::target("avx2")]] inline __m256d seg_offset_inv2_avx2(const Off4& p, double ax, double ay, double az, double abx,
-                                                            double aby, double abz, double inv_l2) {
-  const __m256d pax = _mm256_sub_pd(p.x, _mm256_set1_pd(ax)), pay = _mm256_sub_pd(p.y, _mm256_set1_pd(ay)),
-                paz = _mm256_sub_pd(p.z, _mm256_set1_pd(az));
-  const __m256d vx = _mm256_set1_pd(abx), vy = _mm256_set1_pd(aby), vz = _mm256_set1_pd(abz);
-  __m256d t = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(pax, vx), _mm256_mul_pd(pay, vy)), _mm256_mul_pd(paz, vz));
-  t = _mm256_mul_pd(t, _mm256_set1_pd(inv_l2));
-  // clamp01: 0 below 0, 1 above 1, else t (NaN too)
-  t = _mm256_blendv_pd(t, _mm256_set1_pd(1.0), _mm256_cmp_pd(t, _mm256_set1_pd(1.0), _CMP_GT_OQ));
-  t = _mm256_blendv_pd(t, _mm256_setzero_pd(), _mm256_cmp_pd(t, _mm256_setzero_pd(), _CMP_LT_OQ));
-  const __m256d ox = _mm256_sub_pd(pax, _mm256_mul_pd(t, vx)), oy = _mm256_sub_pd(pay, _mm256_mul_pd(t, vy)),
-                oz = _mm256_sub_pd(paz, _mm256_mul_pd(t, vz));
-  return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ox, ox), _mm256_mul_pd(oy, oy)), _mm256_mul_pd(oz, oz));
-}
-
-// Row i of m applied to r (sweep::detail::to_frame), on four points.
-[[gnu::target("avx2")]] inline __m256d frame_row_avx2(const Eigen::Matrix3d& m, int i, __m256d rx, __m256d ry, __m256d rz) {
-  return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(_mm256_set1_pd(m(i, 0)), rx), _mm256_mul_pd(_mm256_set1_pd(m(i, 1)), ry)),
-                       _mm256_mul_pd(_mm256_set1_pd(m(i, 2)), rz));
-}
-
-// v2 where it is valid and less than best (not NaN): the scalar version's
-// running least.
-[[gnu::target("avx2")]] inline __m256d take_less_avx2(__m256d best, __m256d valid, __m256d v2) {
-  return _mm256_min_pd(_mm256_blendv_pd(_mm256_set1_pd(std::numeric_limits<double>::infinity()), v2, valid), best);
-}
-
-[[gnu::target("avx2")]] void lower_by_ball_line_avx2(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px,
-                                                     const double* py, const double* pz, double* d) {
-  using sweep::LinearPrim;
-  const double dx = lp.d_local.x(), dy = lp.d_local.y(), dz = lp.d_local.z(), L = lp.env.core_length;
-  const bool vertical = lp.kind == LinearPrim::Case::vertical;
-  const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0);
-  while (bits != 0) {
-    std::array<std::size_t, 4> at;
-    std::size_t n = 0;
-    for (; bits != 0 && n < 4; bits &= bits - 1) at[n++] = static_cast<std::size_t>(std::countr_zero(bits));
-    for (std::size_t j = n; j < 4; ++j) at[j] = at[n - 1];  // (repeats: the same value again)
-    const __m256d wx = _mm256_set_pd(px[at[3]], px[at[2]], px[at[1]], px[at[0]]);
-    const __m256d wy = _mm256_set_pd(py[at[3]], py[at[2]], py[at[1]], py[at[0]]);
-    const __m256d wz = _mm256_set_pd(pz[at[3]], pz[at[2]], pz[at[1]], pz[at[0]]);
-    // sweep::detail::to_piece
-    const __m256d rx = _mm256_sub_pd(wx, _mm256_set1_pd(lp.origin.x())),
-                  ry = _mm256_sub_pd(wy, _mm256_set1_pd(lp.origin.y())),
-                  rz = _mm256_sub_pd(wz, _mm256_set1_pd(lp.origin.z()));
-    Off4 p{rx, ry, rz};
-    if (!lp.axis_z) {
-      const Eigen::Matrix3d& m = lp.to_local;
-      p = {frame_row_avx2(m, 0, rx, ry, rz), frame_row_avx2(m, 1, rx, ry, rz), frame_row_avx2(m, 2, rx, ry, rz)};
-    }
-    __m256d n2;
-    if (vertical) {
-      const double z0 = std::min(0.0, dz);
-      n2 = seg_offset_inv2_avx2(p, 0, 0, z0, 0, 0, std::max(0.0, dz) + L - z0, lp.inv_span);
-    } else {
-      // sweep::detail::parallelogram_offset (inv_lr2 != 0: the caller's)
-      const __m256d vdx = _mm256_set1_pd(dx), vdy = _mm256_set1_pd(dy);
-      const __m256d ph = _mm256_add_pd(_mm256_mul_pd(p.x, vdx), _mm256_mul_pd(p.y, vdy));
-      const __m256d s = _mm256_mul_pd(ph, _mm256_set1_pd(lp.inv_r2));
-      const __m256d t = _mm256_mul_pd(_mm256_sub_pd(_mm256_mul_pd(p.z, _mm256_set1_pd(dx * dx + dy * dy)),
-                                                    _mm256_mul_pd(ph, _mm256_set1_pd(dz))),
-                                      _mm256_set1_pd(lp.inv_lr2));
-      const __m256d s_lo = _mm256_cmp_pd(s, zero, _CMP_LT_OQ), s_hi = _mm256_cmp_pd(s, one, _CMP_GT_OQ);
-      const __m256d t_lo = _mm256_cmp_pd(t, zero, _CMP_LT_OQ), t_hi = _mm256_cmp_pd(t, one, _CMP_GT_OQ);
-      const __m256d inside =
-          _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(s, zero, _CMP_GE_OQ), _mm256_cmp_pd(s, one, _CMP_LE_OQ)),
-                        _mm256_and_pd(_mm256_cmp_pd(t, zero, _CMP_GE_OQ), _mm256_cmp_pd(t, one, _CMP_LE_OQ)));
-      // Outside: the least over the edges that count (the others: infinity),
-      // each edge worked out only where some point needs it (below a ball
-      // end's centre, where it cuts, only the bottom edge).
-      const __m256d c3 = _mm256_andnot_pd(_mm256_and_pd(t_lo, _mm256_cmp_pd(p.z, zero, _CMP_LE_OQ)), s_lo);
-      const __m256d c4 = _mm256_andnot_pd(_mm256_and_pd(t_lo, _mm256_cmp_pd(p.z, _mm256_set1_pd(dz), _CMP_LE_OQ)), s_hi);
-      __m256d best = _mm256_set1_pd(std::numeric_limits<double>::infinity());
-      if (_mm256_movemask_pd(t_lo)) best = take_less_avx2(best, t_lo, seg_offset_inv2_avx2(p, 0, 0, 0, dx, dy, dz, lp.inv_dd));
-      if (_mm256_movemask_pd(t_hi)) best = take_less_avx2(best, t_hi, seg_offset_inv2_avx2(p, 0, 0, L, dx, dy, dz, lp.inv_dd));
-      if (_mm256_movemask_pd(c3)) best = take_less_avx2(best, c3, seg_offset_inv2_avx2(p, 0, 0, 0, 0, 0, L, lp.inv_ll));
-      if (_mm256_movemask_pd(c4)) best = take_less_avx2(best, c4, seg_offset_inv2_avx2(p, dx, dy, dz, 0, 0, L, lp.inv_ll));
-      n2 = best;
-      if (_mm256_movemask_pd(inside)) {
-        const __m256d k = _mm256_mul_pd(_mm256_sub_pd(_mm256_mul_pd(p.x, vdy), _mm256_mul_pd(p.y, vdx)), _mm256_set1_pd(lp.inv_r2));
-        const __m256d kx = _mm256_mul_pd(k, vdy), ky = _mm256_mul_pd(k, vdx);  // the offset (k dy, -k dx, 0)
-        n2 = _mm256_blendv_pd(n2, _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(kx, kx), _mm256_mul_pd(ky, ky)), zero), inside);
-      }
-    }
-    std::array<double, 4> dist;
-    _mm256_storeu_pd(dist.data(), _mm256_sub_pd(_mm256_sqrt_pd(n2), _mm256_set1_pd(lp.env.corner_radius)));
-    for (std::size_t j = 0; j < n; ++j) d[at[j]] = std::min(d[at[j]], dist[j]);
-  }
-}
-#endif
-
-void lower_by_ball_line(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
-                        const double* pz, double* d) {
-#if defined(__x86_64__)
-  static const bool avx2 = __builtin_cpu_supports("avx2");
-  if (avx2 && (lp.kind == sweep::LinearPrim::Case::vertical || lp.inv_lr2 != 0))
-    return lower_by_ball_line_avx2(lp, bits, px, py, pz, d);
-#endif
-  lower_by_ball_line_scalar(lp, bits, px, py, pz, d);
 }
 
 // Leaves above this count in a piece's box are culled block by block on

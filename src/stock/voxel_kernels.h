@@ -1,0 +1,42 @@
+#pragma once
+// Private: the stock update's innermost loops over a quarter's voxels
+// (4 x 4 x 4), each in a portable version and, where the CPU has AVX2, one
+// that takes four voxels at a time to the same bits (no FMA: the AVX2
+// target adds none, and the sums run in the portable version's order).
+// The dispatching functions pick the AVX2 one when the CPU has it; the
+// tests hold both to the same bits.
+#include <cstdint>
+
+#include "cutsim/sweep/sweep.h"
+
+namespace cutsim::stock::detail {
+
+/// A convex piece's tangent plane at a quarter's centre, c + g . y.
+struct CentrePlane {
+  double c, gx, gy, gz;
+};
+
+/// The voxels b < n (bits) whose nearest distance so far d[b] is above
+/// `floor` and where the plane, c + (gx yx[b] + gy yy[b] + gz yz[b]) (y the
+/// voxel's offset from the centre, summed as Eigen's dot does), lies below
+/// min(d[b], need[b]): those the piece may lower. (n <= 64)
+std::uint64_t planes_below(const double* d, const double* need, const double* yx, const double* yy, const double* yz,
+                           int n, const CentrePlane& pl, double floor);
+/// d[b] = min(d[b], sweep::detail::ball_line_distance(lp, (px, py, pz)[b]))
+/// for the voxels b in `bits`: a ball end's line lowering the nearest
+/// distance so far.
+void lower_by_ball_line(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
+                        const double* pz, double* d);
+
+/// The two versions, for the tests (the AVX2 ones only where avx2() holds).
+bool avx2();
+std::uint64_t planes_below_scalar(const double* d, const double* need, const double* yx, const double* yy,
+                                  const double* yz, int from, int n, const CentrePlane& pl, double floor);
+std::uint64_t planes_below_avx2(const double* d, const double* need, const double* yx, const double* yy,
+                                const double* yz, int n, const CentrePlane& pl, double floor);
+void lower_by_ball_line_scalar(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
+                               const double* pz, double* d);
+void lower_by_ball_line_avx2(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
+                             const double* pz, double* d);
+
+}  // namespace cutsim::stock::detail
