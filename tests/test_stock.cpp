@@ -116,6 +116,15 @@ TEST(VoxelKernels, PlaneTestGivesThePortableBits) {
       yz[b] = 0.015 * ((b & 3) - 1.5);
     }
     const stock::detail::CentrePlane pl{0.02 * u(rng), u(rng), u(rng), u(rng)};
+    // Some voxels whose bar is the plane there, to the ulp (or one ulp
+    // either side): a sum taken in another order would tip them.
+    for (int b = 0; b < n; ++b) {
+      if (rng() % 3 != 0) continue;
+      const double plane = pl.c + (pl.gx * yx[b] + pl.gy * yy[b] + pl.gz * yz[b]);
+      const int side = static_cast<int>(rng() % 3) - 1;
+      need[b] = side == 0 ? plane : std::nextafter(plane, side * std::numeric_limits<double>::infinity());
+      d[b] = std::numeric_limits<double>::infinity();
+    }
     const std::uint64_t portable =
         stock::detail::planes_below_scalar(d.data(), need.data(), yx.data(), yy.data(), yz.data(), 0, n, pl, -0.03);
     const std::uint64_t wide =

@@ -4,6 +4,8 @@
 #include <array>
 #include <bit>
 #include <cstddef>
+#include <cstdlib>
+#include <cstring>
 #include <limits>
 
 #if defined(__x86_64__)
@@ -14,7 +16,9 @@ namespace cutsim::stock::detail {
 
 bool avx2() {
 #if defined(__x86_64__)
-  static const bool has = __builtin_cpu_supports("avx2");
+  // (CUTSIM_AVX2=0: the portable versions, to compare runs with.)
+  static const bool has = __builtin_cpu_supports("avx2") && !(std::getenv("CUTSIM_AVX2") &&
+                                                              std::strcmp(std::getenv("CUTSIM_AVX2"), "0") == 0);
   return has;
 #else
   return false;
