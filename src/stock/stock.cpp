@@ -1312,8 +1312,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
               std::array<double, 64> d;     // nearest piece's distance so far
               std::array<double, 64> need;  // -v
               std::array<double, 64> yx, yy, yz;  // offset from the quarter's centre
-              std::array<Vec3, 64> p;
-              std::array<double, 64> px, py, pz;  // p, by field
+              std::array<double, 64> px, py, pz;  // the voxel's centre
             };
             Bars bars;
             int nb = 0;
@@ -1327,7 +1326,6 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
               bars.yx[b] = quarter_y[q].x();
               bars.yy[b] = quarter_y[q].y();
               bars.yz[b] = quarter_y[q].z();
-              bars.p[b] = p;
               bars.px[b] = p.x();
               bars.py[b] = p.y();
               bars.pz[b] = p.z();
@@ -1343,11 +1341,12 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
                 // A voxel whose bar is above the piece's bound there: its box,
                 // then its distance.
                 auto at_voxel = [&](std::size_t b, double lim) {
+                  const Vec3 pb(bars.px[b], bars.py[b], bars.pz[b]);
                   if constexpr (boxed) {
-                    const double b2 = sweep::detail::box_distance2(bk, bars.p[b]);
+                    const double b2 = sweep::detail::box_distance2(bk, pb);
                     if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) return std::numeric_limits<double>::infinity();
                   }
-                  const double dj = dist(bars.p[b], lim);
+                  const double dj = dist(pb, lim);
                   if constexpr (inner) {
                     if (dj < lim) bars.d[b] = dj;  // (else only a bound)
                   } else {
