@@ -89,12 +89,12 @@ TEST(Stock, LeafPlanesSeeAFlatFloorUnderAToolAbove) {
 
 }  // namespace
 
-// The voxel step's four-wide loops (voxel_kernels.h) against their
-// portable versions: the same bits, as the stock update's results depend on
-// them to the last digit. (Skipped where the CPU lacks AVX2: the portable
-// versions then run.)
+// The voxel step's loops (voxel_kernels.h) against the definitions they
+// implement, written out here one voxel at a time: the portable versions,
+// the dispatching functions a run calls, and the four-wide AVX2 versions
+// where the CPU has AVX2, all to the same bits (the stock update's
+// results depend on them to the last digit).
 TEST(VoxelKernels, PlaneTestGivesThePortableBits) {
-  if (!stock::detail::avx2()) GTEST_SKIP() << "no AVX2 on this CPU";
   std::mt19937_64 rng(7);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   int tested = 0, set = 0;
@@ -125,20 +125,30 @@ TEST(VoxelKernels, PlaneTestGivesThePortableBits) {
       need[b] = side == 0 ? plane : std::nextafter(plane, side * std::numeric_limits<double>::infinity());
       d[b] = std::numeric_limits<double>::infinity();
     }
+    // The definition: above the floor, and the plane (summed as Eigen's
+    // dot) below the bar.
+    std::uint64_t want = 0;
+    for (int b = 0; b < n; ++b) {
+      const Vec3 y(yx[b], yy[b], yz[b]);
+      if (d[b] > -0.03 && pl.c + Vec3(pl.gx, pl.gy, pl.gz).dot(y) < std::min(d[b], need[b])) want |= std::uint64_t(1) << b;
+    }
     const std::uint64_t portable =
         stock::detail::planes_below_scalar(d.data(), need.data(), yx.data(), yy.data(), yz.data(), 0, n, pl, -0.03);
-    const std::uint64_t wide =
-        stock::detail::planes_below_avx2(d.data(), need.data(), yx.data(), yy.data(), yz.data(), n, pl, -0.03);
-    ASSERT_EQ(portable, wide) << "trial " << trial << ", n " << n;
+    ASSERT_EQ(want, portable) << "trial " << trial << ", n " << n;
+    ASSERT_EQ(want, stock::detail::planes_below(d.data(), need.data(), yx.data(), yy.data(), yz.data(), n, pl, -0.03))
+        << "trial " << trial;
+    if (stock::detail::cpu_has_avx2()) {
+      ASSERT_EQ(want, stock::detail::planes_below_avx2(d.data(), need.data(), yx.data(), yy.data(), yz.data(), n, pl, -0.03))
+          << "trial " << trial << ", n " << n;
+    }
     ++tested;
-    set += std::popcount(portable);
+    set += std::popcount(want);
   }
   EXPECT_EQ(tested, 2000);
   EXPECT_GT(set, 5000);  // the tests pass some voxels and not others
 }
 
 TEST(VoxelKernels, BallLineDistancesGiveThePortableBits) {
-  if (!stock::detail::avx2()) GTEST_SKIP() << "no AVX2 on this CPU";
   const tool::Tool ball = tool::parse_tool_spec("ball:d=4");
   const Eigen::Matrix3d tilted = Eigen::AngleAxisd(0.3, Vec3(1, 0.2, 0).normalized()).toRotationMatrix();
   struct Move {
@@ -171,10 +181,14 @@ TEST(VoxelKernels, BallLineDistancesGiveThePortableBits) {
           d[b] = rng() % 3 == 0 ? std::numeric_limits<double>::infinity() : 2 * u(rng) - 1;
         }
         const std::uint64_t bits = rng() & rng();  // about a quarter of the voxels
-        std::array<double, 64> portable = d, wide = d;
+        std::array<double, 64> portable = d, dispatched = d, wide = d;
         stock::detail::lower_by_ball_line_scalar(*lp, bits, px.data(), py.data(), pz.data(), portable.data());
-        stock::detail::lower_by_ball_line_avx2(*lp, bits, px.data(), py.data(), pz.data(), wide.data());
-        ASSERT_EQ(0, std::memcmp(portable.data(), wide.data(), sizeof portable)) << "trial " << trial;
+        stock::detail::lower_by_ball_line(*lp, bits, px.data(), py.data(), pz.data(), dispatched.data());
+        ASSERT_EQ(0, std::memcmp(portable.data(), dispatched.data(), sizeof portable)) << "trial " << trial;
+        if (stock::detail::cpu_has_avx2()) {
+          stock::detail::lower_by_ball_line_avx2(*lp, bits, px.data(), py.data(), pz.data(), wide.data());
+          ASSERT_EQ(0, std::memcmp(portable.data(), wide.data(), sizeof portable)) << "trial " << trial;
+        }
         for (int b = 0; b < 64; ++b) {
           // Only the voxels in `bits`, each to the least of its distance so far and the piece's.
           const double want = (bits >> b) & 1 ? std::min(d[b], sweep::detail::ball_line_distance(*lp, Vec3(px[b], py[b], pz[b])))

@@ -14,15 +14,19 @@
 
 namespace cutsim::stock::detail {
 
-bool avx2() {
+bool cpu_has_avx2() {
 #if defined(__x86_64__)
-  // (CUTSIM_AVX2=0: the portable versions, to compare runs with.)
-  static const bool has = __builtin_cpu_supports("avx2") && !(std::getenv("CUTSIM_AVX2") &&
-                                                              std::strcmp(std::getenv("CUTSIM_AVX2"), "0") == 0);
+  static const bool has = __builtin_cpu_supports("avx2");
   return has;
 #else
   return false;
 #endif
+}
+
+bool avx2() {
+  // (CUTSIM_AVX2=0: the portable versions, to compare runs with.)
+  static const bool on = cpu_has_avx2() && !(std::getenv("CUTSIM_AVX2") && std::strcmp(std::getenv("CUTSIM_AVX2"), "0") == 0);
+  return on;
 }
 
 // The voxels b < n (bits) of a quarter whose nearest distance so far d[b]

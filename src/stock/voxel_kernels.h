@@ -28,11 +28,13 @@ std::uint64_t planes_below(const double* d, const double* need, const double* yx
 void lower_by_ball_line(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
                         const double* pz, double* d);
 
+/// Whether the CPU has AVX2 (false off x86-64).
+bool cpu_has_avx2();
 /// Whether the dispatching functions take the AVX2 versions: the CPU has
 /// AVX2 and the environment does not set CUTSIM_AVX2=0.
 bool avx2();
-/// The two versions, for the tests (the AVX2 ones only where the CPU has
-/// AVX2; elsewhere they are the portable ones).
+/// The two versions, for the tests (the AVX2 ones only where
+/// cpu_has_avx2(); off x86-64 they are the portable ones).
 std::uint64_t planes_below_scalar(const double* d, const double* need, const double* yx, const double* yy,
                                   const double* yz, int from, int n, const CentrePlane& pl, double floor);
 std::uint64_t planes_below_avx2(const double* d, const double* need, const double* yx, const double* yy,
