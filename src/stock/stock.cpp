@@ -20,6 +20,7 @@
 
 namespace cutsim::stock {
 
+using detail::boxes_reach;
 using detail::CentrePlane;
 using detail::lower_by_ball_line;
 using detail::planes_below;
@@ -1340,19 +1341,22 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
               auto take = [&](auto&& dist, auto inner, auto plane, auto boxed) {
                 // A voxel whose bar is above the piece's bound there: its box,
                 // then its distance.
-                auto at_voxel = [&](std::size_t b, double lim) {
-                  const Vec3 pb(bars.px[b], bars.py[b], bars.pz[b]);
-                  if constexpr (boxed) {
-                    const double b2 = sweep::detail::box_distance2(bk, pb);
-                    if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) return std::numeric_limits<double>::infinity();
-                  }
-                  const double dj = dist(pb, lim);
+                // Its distance there, lowering the bar.
+                auto evaluate = [&](std::size_t b, double lim) {
+                  const double dj = dist(Vec3(bars.px[b], bars.py[b], bars.pz[b]), lim);
                   if constexpr (inner) {
                     if (dj < lim) bars.d[b] = dj;  // (else only a bound)
                   } else {
                     bars.d[b] = std::min(bars.d[b], dj);
                   }
                   return dj;
+                };
+                auto at_voxel = [&](std::size_t b, double lim) {
+                  if constexpr (boxed) {
+                    const double b2 = sweep::detail::box_distance2(bk, Vec3(bars.px[b], bars.py[b], bars.pz[b]));
+                    if (b2 > 0 && (lim <= 0 || b2 >= lim * lim)) return;
+                  }
+                  evaluate(b, lim);
                 };
                 if constexpr (plane) {
                   static_assert(!inner, "a joint has no plane");
@@ -1365,11 +1369,16 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
                     at_voxel(b, std::min(bars.d[b], bars.need[b]));
                   }
                 } else {
+                  static_assert(decltype(boxed)::value, "the cone's voxels are those its box leaves");
                   double cc = key;  // cone: the value at `at` (first, the key at the centre)
                   Vec3 at = Vec3::Zero();
-                  for (int bi = 0; bi < nb; ++bi) {
-                    const auto b = static_cast<std::size_t>(bi);
-                    if (bars.d[b] <= -g) continue;  // clamped to air whatever the rest
+                  // The voxels not clamped to air (at or below -g: air
+                  // whatever the rest) that the box leaves, first (its test
+                  // does not depend on the order), then the cone's test.
+                  for (std::uint64_t reach = boxes_reach(bars.d.data(), bars.need.data(), bars.px.data(), bars.py.data(),
+                                                         bars.pz.data(), nb, bk, inner, -g);
+                       reach != 0; reach &= reach - 1) {
+                    const auto b = static_cast<std::size_t>(std::countr_zero(reach));
                     const double thr = std::min(bars.d[b], bars.need[b]);
                     const double lim = inner ? std::min(thr, 0.0) : thr;
                     // (On squared lengths: a fly-cutter's tori all cut within
@@ -1378,8 +1387,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
                     const Vec3 y(bars.yx[b], bars.yy[b], bars.yz[b]);
                     const double margin = cc - lim;
                     if (margin >= 0 && margin * margin >= (y - at).squaredNorm()) continue;
-                    const double dj = at_voxel(b, lim);
-                    if (dj == std::numeric_limits<double>::infinity()) continue;  // its box passed it over
+                    const double dj = evaluate(b, lim);
                     cc = dj;  // (a joint's: at most its value, still a bound)
                     at = y;
                   }

@@ -28,6 +28,15 @@ std::uint64_t planes_below(const double* d, const double* need, const double* yx
 void lower_by_ball_line(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
                         const double* pz, double* d);
 
+/// The voxels b < n (bits) whose nearest distance so far d[b] is not at
+/// or below `floor` and that a piece's box leaves to its distance: those
+/// at squared distance 0 from the box (sweep::detail::box_distance2 at
+/// (px, py, pz)[b]), or with a positive limit whose square the squared
+/// distance is below. The limit is min(d[b], need[b]), and for a piece
+/// whose inside only matters (`inner`) at most 0. (n <= 64)
+std::uint64_t boxes_reach(const double* d, const double* need, const double* px, const double* py, const double* pz,
+                          int n, const Aabb& box, bool inner, double floor);
+
 /// Whether the CPU has AVX2 (false off x86-64).
 bool cpu_has_avx2();
 /// Whether the dispatching functions take the AVX2 versions: the CPU has
@@ -39,6 +48,10 @@ std::uint64_t planes_below_scalar(const double* d, const double* need, const dou
                                   const double* yz, int from, int n, const CentrePlane& pl, double floor);
 std::uint64_t planes_below_avx2(const double* d, const double* need, const double* yx, const double* yy,
                                 const double* yz, int n, const CentrePlane& pl, double floor);
+std::uint64_t boxes_reach_scalar(const double* d, const double* need, const double* px, const double* py,
+                                 const double* pz, int from, int n, const Aabb& box, bool inner, double floor);
+std::uint64_t boxes_reach_avx2(const double* d, const double* need, const double* px, const double* py,
+                               const double* pz, int n, const Aabb& box, bool inner, double floor);
 void lower_by_ball_line_scalar(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
                                const double* pz, double* d);
 void lower_by_ball_line_avx2(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
