@@ -225,6 +225,77 @@ TEST(VoxelKernels, BoxTestGivesThePortableBits) {
   EXPECT_LT(passed, 4000 * 32);
 }
 
+// A profile prism's distances four at a time (prism_distances) against
+// sweep::detail::prism_distance, to the bit: V and nose tools, moves along
+// the cutting direction, sheared sideways and back along it, a tilted
+// frame; points inside, beside, past the ends and beyond the box.
+TEST(VoxelKernels, PrismDistancesGiveThePortableBits) {
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.5, Vec3(0.2, 1, 0.4).normalized()).toRotationMatrix();
+  struct Case {
+    const char* spec;
+    Vec3 move;
+    Eigen::Matrix3d frame;
+  };
+  const std::vector<Case> cases = {
+      {"vtool:angle=90,clearance=7,h=0.1,body=0.3", Vec3(0.05, 0, 0), Eigen::Matrix3d::Identity()},  // the snowflake's
+      {"vtool:angle=90,h=0.05", Vec3(0.02, 0.005, -0.003), Eigen::Matrix3d::Identity()},
+      {"vtool:angle=60,h=0.05", Vec3(-0.03, -0.01, 0.01), R},
+      {"nose:r=0.5,angle=100", Vec3(0.3, 0.02, -0.01), Eigen::Matrix3d::Identity()},
+      {"nose:r=0.05,angle=60", Vec3(0.1, 0.03, 0.08), R},
+  };
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  int prisms = 0, inside = 0, outside = 0, boxed = 0;
+  for (const Case& cs : cases) {
+    const sweep::Sweep sw = sweep::sweep_line(Vec3(0.01, -0.02, 0.03), Vec3(0.01, -0.02, 0.03) + cs.move, cs.frame,
+                                              tool::parse_tool_spec(cs.spec, "test"));
+    for (const sweep::Primitive& piece : sw.prims) {
+      const auto* pp = std::get_if<sweep::ProfilePrim>(&piece);
+      if (!pp || !pp->prism) continue;
+      ++prisms;
+      const Aabb box = pp->bounds.expanded(0.05);
+      for (int trial = 0; trial < 500; ++trial) {
+        const int n = static_cast<int>(rng() % 65);
+        std::array<double, 64> px{}, py{}, pz{}, portable{}, dispatched{}, wide{};
+        for (int i = 0; i < n; ++i) {
+          px[i] = box.min.x() + u(rng) * (box.max.x() - box.min.x());
+          py[i] = box.min.y() + u(rng) * (box.max.y() - box.min.y());
+          pz[i] = box.min.z() + u(rng) * (box.max.z() - box.min.z());
+          if (rng() % 8 == 0) {  // on the move's line (the apex's path): the round case at r = 0
+            const double t = u(rng) * 1.2 - 0.1;
+            const Vec3 w = pp->origin + pp->to_local.transpose() * (t * pp->d_local);
+            px[i] = w.x();
+            py[i] = w.y();
+            pz[i] = w.z();
+          }
+        }
+        stock::detail::prism_distances_scalar(*pp, 0, n, px.data(), py.data(), pz.data(), portable.data());
+        stock::detail::prism_distances(*pp, n, px.data(), py.data(), pz.data(), dispatched.data());
+        ASSERT_EQ(0, std::memcmp(portable.data(), dispatched.data(), sizeof portable)) << cs.spec << ", trial " << trial;
+        if (stock::detail::cpu_has_avx2()) {
+          stock::detail::prism_distances_avx2(*pp, n, px.data(), py.data(), pz.data(), wide.data());
+          for (int i = 0; i < n; ++i)
+            ASSERT_EQ(0, std::memcmp(&portable[static_cast<std::size_t>(i)], &wide[static_cast<std::size_t>(i)], sizeof(double)))
+                << cs.spec << ", trial " << trial << ", point " << i << ": " << portable[static_cast<std::size_t>(i)]
+                << " against " << wide[static_cast<std::size_t>(i)];
+        }
+        for (int i = 0; i < n; ++i) {
+          const Vec3 w(px[i], py[i], pz[i]);
+          const double want = sweep::detail::prism_distance(*pp, w);
+          ASSERT_EQ(0, std::memcmp(&want, &portable[static_cast<std::size_t>(i)], sizeof want));
+          inside += want < 0;
+          outside += want > 0;
+          boxed += want > 0 && want * want == sweep::detail::box_distance2(pp->bounds, w);
+        }
+      }
+    }
+  }
+  EXPECT_EQ(prisms, 5);
+  EXPECT_GT(inside, 5000);
+  EXPECT_GT(outside, 20000);
+  EXPECT_GT(boxed, 100);  // some where the way to the box is the distance
+}
+
 TEST(VoxelKernels, BallLineDistancesGiveThePortableBits) {
   const tool::Tool ball = tool::parse_tool_spec("ball:d=4");
   const Eigen::Matrix3d tilted = Eigen::AngleAxisd(0.3, Vec3(1, 0.2, 0).normalized()).toRotationMatrix();

@@ -24,6 +24,7 @@ using detail::boxes_reach;
 using detail::CentrePlane;
 using detail::lower_by_ball_line;
 using detail::planes_below;
+using detail::prism_distances;
 using openvdb::Coord;
 using openvdb::CoordBBox;
 using LeafT = openvdb::FloatTree::LeafNodeType;
@@ -1268,6 +1269,17 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
             sweep::SectionPlane sec;
             const bool sectioned = !seeded && !inner && lowered_section_plane(p0, cb, &sec);
             if (sectioned && sweep::section_bound_over(sec, hq) >= need_max) continue;
+            // A profile prism's distances (the snowflake's V tool), four
+            // at a time once the voxels that need one are listed.
+            const auto* pp0 = std::get_if<sweep::ProfilePrim>(&p0);
+            const bool listed = !inner && pp0 && pp0->prism;
+            struct Listed {
+              std::array<int, 64> idx;
+              std::array<float, 64> v;
+              std::array<double, 64> px, py, pz, d;
+            };
+            Listed list;
+            int nl = 0;
             material_voxels(bx, by, bz, [&](int idx, int q, float v, const Vec3& p) {
               const double need = inner ? std::min(-static_cast<double>(v), 0.0) : -static_cast<double>(v);
               if (key0 - quarter_off[q] >= need) return;
@@ -1279,12 +1291,25 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
                 if (b2 > 0 && (need <= 0 || b2 >= need * need)) return;
                 bounded = !reuse0;
               }
-              if (!inner) {
+              if (listed) {
+                const auto i = static_cast<std::size_t>(nl++);
+                list.idx[i] = idx;
+                list.v[i] = v;
+                list.px[i] = p.x();
+                list.py[i] = p.y();
+                list.pz[i] = p.z();
+              } else if (!inner) {
                 cut_voxel(idx, v, sweep::distance_inline(p0, p));
               } else if (const double d = sweep::distance_below(p0, p, need); d < need) {
                 cut_voxel(idx, v, d);  // (else only a bound, and the voxel stays)
               }
             });
+            if (nl > 0) {
+              // (A voxel's cut changes only its own value: the list's
+              // voxels read theirs before any was cut.)
+              prism_distances(*pp0, nl, list.px.data(), list.py.data(), list.pz.data(), list.d.data());
+              for (std::size_t i = 0; i < static_cast<std::size_t>(nl); ++i) cut_voxel(list.idx[i], list.v[i], list.d[i]);
+            }
             continue;
           }
           // Every piece 1-Lipschitz (a ball end's raster, a hull's 5-axis

@@ -37,6 +37,11 @@ void lower_by_ball_line(const sweep::LinearPrim& lp, std::uint64_t bits, const d
 std::uint64_t boxes_reach(const double* d, const double* need, const double* px, const double* py, const double* pz,
                           int n, const Aabb& box, bool inner, double floor);
 
+/// out[i] = sweep::detail::prism_distance(pp, (px, py, pz)[i]) for i < n:
+/// a profile prism's (ProfilePrim::prism) distances at a quarter's voxels.
+void prism_distances(const sweep::ProfilePrim& pp, int n, const double* px, const double* py, const double* pz,
+                     double* out);
+
 /// Whether the CPU has AVX2 (false off x86-64).
 bool cpu_has_avx2();
 /// Whether the dispatching functions take the AVX2 versions: the CPU has
@@ -52,6 +57,10 @@ std::uint64_t boxes_reach_scalar(const double* d, const double* need, const doub
                                  const double* pz, int from, int n, const Aabb& box, bool inner, double floor);
 std::uint64_t boxes_reach_avx2(const double* d, const double* need, const double* px, const double* py,
                                const double* pz, int n, const Aabb& box, bool inner, double floor);
+void prism_distances_scalar(const sweep::ProfilePrim& pp, int from, int n, const double* px, const double* py,
+                            const double* pz, double* out);
+void prism_distances_avx2(const sweep::ProfilePrim& pp, int n, const double* px, const double* py, const double* pz,
+                          double* out);
 void lower_by_ball_line_scalar(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
                                const double* pz, double* d);
 void lower_by_ball_line_avx2(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
