@@ -199,6 +199,52 @@ TEST(Cli, TwoRunsGiveBitIdenticalReportsAndMeshes) {
 }
 
 }  // namespace
+// A V tool's planing (the snowflake's path: one-piece prism quarters and
+// joints) cut with CUTSIM_AVX2=1 and =0: the same glb.
+TEST(Cli, Avx2LoopsCutTheSameVToolStockAsThePortableOnes) {
+  TempDir dir;
+  std::string prog = "G21 G90 G94\nG0 Z0.1\n";
+  for (int layer = 1; layer <= 2; ++layer)
+    for (int row = 0; row < 9; ++row) {
+      const double y = -0.04 + 0.01 * row, z = -0.008 * layer - 0.002 * std::sin(3.0 * y);
+      prog += "G0 X-0.3 Y" + std::to_string(y) + "\nG1 Z" + std::to_string(z) + " F60\n";
+      for (int i = 1; i <= 6; ++i) prog += "G1 X" + std::to_string(-0.3 + 0.1 * i) + " Z" + std::to_string(z - 0.001 * (i % 2)) + "\n";
+      prog += "G0 Z0.1\n";
+    }
+  prog += "M30\n";
+  dir.write("v.nc", prog);
+  dir.write("v.toml", "[stock]\nbox = [-1, -1, -1, 1, 1, 0]\n[tool]\nspec = \"vtool:angle=90,clearance=7,h=0.1,body=0.3\"\n"
+                      "[simulation]\nvoxel_mm = 0.002\nstart = [0, 0, 0.1]\n");
+  std::string err;
+  for (const std::string env : {"CUTSIM_AVX2=1", "CUTSIM_AVX2=0"})
+    ASSERT_LE(run_cli_raw("env " + env + " " + std::string(CUTSIM_BIN) + " run " + dir.file("v.nc") + " -o " +
+                              dir.file(env.substr(12)),
+                          nullptr, &err),
+              1)  // (1: contacts, the clearance face on the walls)
+        << err;
+  const std::string wide = slurp(dir.file("1/v.glb")), portable = slurp(dir.file("0/v.glb"));
+  EXPECT_GT(wide.size(), 10000u);
+  EXPECT_TRUE(wide == portable) << "the glb differs (" << wide.size() << " and " << portable.size() << " bytes)";
+  const auto j = nlohmann::json::parse(slurp(dir.file("0/v.report.json")));
+  EXPECT_GT(j["removed_volume_mm3"].get<double>(), 1e-4);
+  EXPECT_GT(j["voxel_evaluations"].get<double>(), 1e5);
+}
+
+// The four-axis case on one thread and on two: the same glb, deviation
+// colours included (they once depended on how the threads split the
+// vertices, in the last bits).
+TEST(Cli, OneThreadAndTwoWriteTheSameGlb) {
+  TempDir dir;
+  const std::string prog = std::string(CUTSIM_SOURCE_DIR) + "/ncprograms/fouraxis_faces.nc";
+  std::string err;
+  for (const std::string t : {"1", "2"})
+    ASSERT_EQ(run_cli_raw(std::string(CUTSIM_BIN) + " run " + prog + " --threads " + t + " -o " + dir.file(t), nullptr, &err), 0)
+        << err;
+  const std::string one = slurp(dir.file("1/fouraxis_faces.glb")), two = slurp(dir.file("2/fouraxis_faces.glb"));
+  EXPECT_GT(one.size(), 100000u);
+  EXPECT_TRUE(one == two) << "the glb differs (" << one.size() << " and " << two.size() << " bytes)";
+}
+
 }  // namespace cutsim::test
 
 namespace cutsim::test {
