@@ -225,6 +225,80 @@ TEST(VoxelKernels, BoxTestGivesThePortableBits) {
   EXPECT_LT(passed, 4000 * 32);
 }
 
+// The bounds taken for a whole quarter before its voxel loop
+// (quarter_reach) against their definition voxel by voxel: material (below
+// the band), and the need above the key less the offset and above the
+// section plane's bound (sweep::section_bound), for a V tool's prism.
+TEST(VoxelKernels, QuarterBoundsGiveThePortableBits) {
+  const sweep::Sweep sw = sweep::sweep_line(Vec3(0, 0, 0), Vec3(0.02, 0.004, -0.002), Eigen::Matrix3d::Identity(),
+                                            tool::parse_tool_spec("vtool:angle=90,h=0.05", "test"));
+  const auto& prism = sw.prims.at(0);
+  std::mt19937_64 rng(29);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const double h = 0.001;
+  const float gamma = static_cast<float>(2 * h);
+  std::array<double, 64> off{}, yx{}, yy{}, yz{};
+  for (int q = 0; q < 64; ++q) {
+    const Vec3 y = h * Vec3((q >> 4) - 1.5, ((q >> 2) & 3) - 1.5, (q & 3) - 1.5);
+    off[static_cast<std::size_t>(q)] = y.norm();
+    yx[static_cast<std::size_t>(q)] = y.x();
+    yy[static_cast<std::size_t>(q)] = y.y();
+    yz[static_cast<std::size_t>(q)] = y.z();
+  }
+  int set = 0, air = 0, by_key = 0, by_section = 0, on_key = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    std::array<float, 512> data{};
+    for (float& v : data) v = rng() % 4 == 0 ? gamma : static_cast<float>((2 * u(rng) - 1) * 2 * h);
+    const int first = static_cast<int>(((rng() % 2) << 8) | ((rng() % 2) << 5) | ((rng() % 2) << 2));  // a quarter's first voxel
+    const Vec3 centre(0.02 * u(rng), 0.006 * u(rng) - 0.003, 0.004 * u(rng) - 0.003);
+    sweep::SectionPlane sec;
+    ASSERT_TRUE(sweep::prism_section_plane(prism, centre, &sec));
+    const bool sectioned = trial % 3 != 0, inner = trial % 4 == 1;
+    double key = sweep::distance(prism, centre) - (trial % 5 == 0 ? 0.0 : 2 * h * u(rng));
+    if (trial % 2 == 0) {
+      // A voxel whose need is the key less its offset, exactly (the key
+      // moved by an ulp or two till it is).
+      const int q = static_cast<int>(rng() % 64);
+      const double o = off[static_cast<std::size_t>(q)];
+      const float v = data[static_cast<std::size_t>(first + ((q >> 4) << 6) + (((q >> 2) & 3) << 3) + (q & 3))];
+      const double need = inner ? std::min(-static_cast<double>(v), 0.0) : -static_cast<double>(v);
+      double k = o + need;
+      for (int i = 0; i < 8 && k - o != need; ++i) k = std::nextafter(k, k - o < need ? 1.0 : -1.0);
+      if (k - o == need && v < gamma) key = k;
+    }
+    std::uint64_t want = 0;
+    for (int q = 0; q < 64; ++q) {
+      const auto i = static_cast<std::size_t>(q);
+      const float v = data[static_cast<std::size_t>(first + ((q >> 4) << 6) + (((q >> 2) & 3) << 3) + (q & 3))];
+      if (v >= gamma) { ++air; continue; }
+      const double need = inner ? std::min(-static_cast<double>(v), 0.0) : -static_cast<double>(v);
+      on_key += key - off[i] == need;
+      if (key - off[i] >= need) { ++by_key; continue; }
+      if (sectioned && sweep::section_bound(sec, Vec3(yx[i], yy[i], yz[i])) >= need) { ++by_section; continue; }
+      want |= std::uint64_t(1) << q;
+    }
+    const sweep::SectionPlane* sp = sectioned ? &sec : nullptr;
+    const std::uint64_t portable = stock::detail::quarter_reach_scalar(data.data(), first, gamma, key, off.data(), inner, sp,
+                                                                       yx.data(), yy.data(), yz.data());
+    ASSERT_EQ(want, portable) << "trial " << trial;
+    ASSERT_EQ(want, stock::detail::quarter_reach(data.data(), first, gamma, key, off.data(), inner, sp, yx.data(), yy.data(),
+                                                 yz.data()))
+        << "trial " << trial;
+    if (stock::detail::cpu_has_avx2()) {
+      ASSERT_EQ(want, stock::detail::quarter_reach_avx2(data.data(), first, gamma, key, off.data(), inner, sp, yx.data(),
+                                                        yy.data(), yz.data()))
+          << "trial " << trial;
+    }
+    set += std::popcount(want);
+  }
+  // Every test passes some voxels over and leaves others.
+  EXPECT_GT(set, 10000);
+  EXPECT_GT(air, 10000);
+  EXPECT_GT(by_key, 5000);
+  EXPECT_GT(by_section, 1000);
+  EXPECT_GT(on_key, 100);
+}
+
 // A profile prism's distances four at a time (prism_distances) against
 // sweep::detail::prism_distance, to the bit: V and nose tools, moves along
 // the cutting direction, sheared sideways and back along it, a tilted

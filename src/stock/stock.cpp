@@ -25,6 +25,7 @@ using detail::CentrePlane;
 using detail::lower_by_ball_line;
 using detail::planes_below;
 using detail::prism_distances;
+using detail::quarter_reach;
 using openvdb::Coord;
 using openvdb::CoordBBox;
 using LeafT = openvdb::FloatTree::LeafNodeType;
@@ -1071,10 +1072,13 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
     // A voxel's offset from its quarter's centre, and its length, by its
     // place in the quarter.
     std::array<Vec3, 64> quarter_y;
-    std::array<double, 64> quarter_off;
+    std::array<double, 64> quarter_off, quarter_yx, quarter_yy, quarter_yz;  // (the offsets by field too)
     for (int q = 0; q < 64; ++q) {
       quarter_y[q] = h * Vec3((q >> 4) - 1.5, ((q >> 2) & 3) - 1.5, (q & 3) - 1.5);
       quarter_off[q] = quarter_y[q].norm();
+      quarter_yx[q] = quarter_y[q].x();
+      quarter_yy[q] = quarter_y[q].y();
+      quarter_yz[q] = quarter_y[q].z();
     }
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& r) {
       std::vector<const sweep::Primitive*> cand;
@@ -1175,6 +1179,32 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
                 if (partial && !m.roi_index.isInside(Coord(o.x() + ix, o.y() + iy, o.z() + iz))) continue;
                 fn(idx, ((ix - bx) << 4) | ((iy - by) << 2) | (iz - bz), v, lmin + h * Vec3(ix, iy, iz));
               }
+        };
+        // The same for the voxels of the quarter whose need (-v; `inner`:
+        // min(-v, 0)) lies above `key` less their offset and, with `sec`,
+        // above its section bound: the others, in the order above, with
+        // the bounds taken for the whole quarter first (quarter_reach;
+        // voxel by voxel where the ROI cuts the leaf).
+        auto reached_voxels = [&](int bx, int by, int bz, double key, bool inner, const sweep::SectionPlane* sec,
+                                  auto&& fn) {
+          if (partial) {
+            material_voxels(bx, by, bz, [&](int idx, int q, float v, const Vec3& p) {
+              const double need = inner ? std::min(-static_cast<double>(v), 0.0) : -static_cast<double>(v);
+              if (key - quarter_off[q] >= need) return;
+              if (sec && sweep::section_bound(*sec, quarter_y[q]) >= need) return;
+              fn(idx, q, v, p);
+            });
+            return;
+          }
+          const int first = (bx << 6) | (by << 3) | bz;
+          for (std::uint64_t bits = quarter_reach(data, first, m.gamma, key, quarter_off.data(), inner, sec,
+                                                  quarter_yx.data(), quarter_yy.data(), quarter_yz.data());
+               bits != 0; bits &= bits - 1) {
+            const int q = std::countr_zero(bits);
+            const int ix = bx + (q >> 4), iy = by + ((q >> 2) & 3), iz = bz + (q & 3);
+            const int idx = (ix << 6) | (iy << 3) | iz;
+            fn(idx, q, data[idx], lmin + h * Vec3(ix, iy, iz));
+          }
         };
         // A voxel of value v where the nearest piece is d away: -d where that
         // is more (less material), clamped to the band.
@@ -1280,10 +1310,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
             };
             Listed list;
             int nl = 0;
-            material_voxels(bx, by, bz, [&](int idx, int q, float v, const Vec3& p) {
+            reached_voxels(bx, by, bz, key0, inner, sectioned ? &sec : nullptr, [&](int idx, int q, float v, const Vec3& p) {
               const double need = inner ? std::min(-static_cast<double>(v), 0.0) : -static_cast<double>(v);
-              if (key0 - quarter_off[q] >= need) return;
-              if (sectioned && sweep::section_bound(sec, quarter_y[q]) >= need) return;
               ++evaluated;
               if (bounded) {
                 if (seeded && c0 + g0.dot(quarter_y[q]) >= need) return;
@@ -1342,8 +1370,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
             };
             Bars bars;
             int nb = 0;
-            material_voxels(bx, by, bz, [&](int idx, int q, float v, const Vec3& p) {
-              if (sub[0].first - quarter_off[q] >= -static_cast<double>(v)) return;
+            reached_voxels(bx, by, bz, sub[0].first, false, nullptr, [&](int idx, int q, float v, const Vec3& p) {
               const auto b = static_cast<std::size_t>(nb++);
               bars.idx[b] = idx;
               bars.v[b] = v;

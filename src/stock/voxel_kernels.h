@@ -42,6 +42,14 @@ std::uint64_t boxes_reach(const double* d, const double* need, const double* px,
 void prism_distances(const sweep::ProfilePrim& pp, int n, const double* px, const double* py, const double* pz,
                      double* out);
 
+/// The voxels of a 4^3 quarter (bit q = 16 x + 4 y + z; voxel q at
+/// data[first + 64 x + 8 y + z]) that hold material (a value below
+/// `gamma`) and whose need (-v; `inner`: min(-v, 0)) lies above the
+/// piece's bound there: key - off[q], and with `sec`, also
+/// sweep::section_bound(*sec, (yx, yy, yz)[q]).
+std::uint64_t quarter_reach(const float* data, int first, float gamma, double key, const double* off, bool inner,
+                            const sweep::SectionPlane* sec, const double* yx, const double* yy, const double* yz);
+
 /// Whether the CPU has AVX2 (false off x86-64).
 bool cpu_has_avx2();
 /// Whether the dispatching functions take the AVX2 versions: the CPU has
@@ -57,6 +65,11 @@ std::uint64_t boxes_reach_scalar(const double* d, const double* need, const doub
                                  const double* pz, int from, int n, const Aabb& box, bool inner, double floor);
 std::uint64_t boxes_reach_avx2(const double* d, const double* need, const double* px, const double* py,
                                const double* pz, int n, const Aabb& box, bool inner, double floor);
+std::uint64_t quarter_reach_scalar(const float* data, int first, float gamma, double key, const double* off,
+                                   bool inner, const sweep::SectionPlane* sec, const double* yx, const double* yy,
+                                   const double* yz);
+std::uint64_t quarter_reach_avx2(const float* data, int first, float gamma, double key, const double* off, bool inner,
+                                 const sweep::SectionPlane* sec, const double* yx, const double* yy, const double* yz);
 void prism_distances_scalar(const sweep::ProfilePrim& pp, int from, int n, const double* px, const double* py,
                             const double* pz, double* out);
 void prism_distances_avx2(const sweep::ProfilePrim& pp, int n, const double* px, const double* py, const double* pz,
