@@ -1180,11 +1180,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
                 fn(idx, ((ix - bx) << 4) | ((iy - by) << 2) | (iz - bz), v, lmin + h * Vec3(ix, iy, iz));
               }
         };
-        // The same for the voxels of the quarter whose need (-v; `inner`:
-        // min(-v, 0)) lies above `key` less their offset and, with `sec`,
-        // above its section bound: the others, in the order above, with
-        // the bounds taken for the whole quarter first (quarter_reach;
-        // voxel by voxel where the ROI cuts the leaf).
+        // As material_voxels, in the same order, but only for the voxels
+        // whose need (-v; `inner`: min(-v, 0)) lies above `key` less their
+        // offset and, with `sec`, above its section bound: those bounds
+        // taken for the whole quarter first (quarter_reach), or voxel by
+        // voxel where the ROI cuts the leaf.
         auto reached_voxels = [&](int bx, int by, int bz, double key, bool inner, const sweep::SectionPlane* sec,
                                   auto&& fn) {
           if (partial) {
@@ -1391,9 +1391,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
               // inside counts), `plane` whether its plane at the centre bounds
               // it, `boxed` whether its box is tested too.
               auto take = [&](auto&& dist, auto inner, auto plane, auto boxed) {
-                // A voxel whose bar is above the piece's bound there: its box,
-                // then its distance.
-                // Its distance there, lowering the bar.
+                // The piece's distance at a voxel, lowering its bar.
                 auto evaluate = [&](std::size_t b, double lim) {
                   const double dj = dist(Vec3(bars.px[b], bars.py[b], bars.pz[b]), lim);
                   if constexpr (inner) {
@@ -1403,6 +1401,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
                   }
                   return dj;
                 };
+                // A voxel whose bar is above the piece's bound there: its box,
+                // then its distance.
                 auto at_voxel = [&](std::size_t b, double lim) {
                   if constexpr (boxed) {
                     const double b2 = sweep::detail::box_distance2(bk, Vec3(bars.px[b], bars.py[b], bars.pz[b]));

@@ -114,12 +114,11 @@ namespace {
 // vector max(x, y) and min(x, y) are (x > y ? x : y), (x < y ? x : y).
 [[gnu::target("avx2")]] inline __m256d std_max_avx2(__m256d a, __m256d b) { return _mm256_max_pd(b, a); }
 [[gnu::target("avx2")]] inline __m256d std_min_avx2(__m256d a, __m256d b) { return _mm256_min_pd(b, a); }
-// std::max(std::max(lo - p, p - hi), 0.0) on four points: _mm256_max_pd(a,
-// b) is (a > b ? a : b), std::max(a, b) is (a < b ? b : a), the same value
-// (and the same zero's sign) with the arguments swapped.
+// std::max(std::max(lo - p, p - hi), 0.0) on four points: the box's gap
+// along one axis (sweep::detail::box_distance2).
 [[gnu::target("avx2")]] inline __m256d box_gap_avx2(__m256d p, double lo, double hi) {
-  const __m256d inner = _mm256_max_pd(_mm256_sub_pd(p, _mm256_set1_pd(hi)), _mm256_sub_pd(_mm256_set1_pd(lo), p));
-  return _mm256_max_pd(_mm256_setzero_pd(), inner);
+  const __m256d inner = std_max_avx2(_mm256_sub_pd(_mm256_set1_pd(lo), p), _mm256_sub_pd(p, _mm256_set1_pd(hi)));
+  return std_max_avx2(inner, _mm256_setzero_pd());
 }
 }  // namespace
 
