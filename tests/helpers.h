@@ -5,7 +5,10 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 #include <unistd.h>
+
+#include <Eigen/Geometry>
 
 #include "cutsim/sim/simulate.h"
 #include "cutsim/io/job.h"
@@ -54,6 +57,25 @@ int run_cli_raw(const std::string& command, std::string* out = nullptr, std::str
 inline std::string slurp(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+/// Straight moves of V and nose tools for the profile prisms' tests, each
+/// from the same start (prism_start): along the cutting direction, sheared
+/// sideways, back along it, and on a tilted frame.
+struct PrismMove {
+  const char* spec;
+  Vec3 move;
+  Eigen::Matrix3d frame;
+};
+inline const Vec3 prism_start(0.01, -0.02, 0.03);
+inline std::vector<PrismMove> prism_moves() {
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.5, Vec3(0.2, 1, 0.4).normalized()).toRotationMatrix();
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  return {{"nose:r=0.5,angle=100", Vec3(0.3, 0.02, -0.01), I},
+          {"nose:r=0.5,angle=100", Vec3(-0.2, -0.05, 0.04), I},
+          {"nose:r=0.05,angle=60", Vec3(0.1, 0.03, 0.08), R},
+          {"vtool:angle=90,h=0.05", Vec3(0.02, 0.005, -0.003), I},
+          {"vtool:angle=60,h=0.05", Vec3(0.03, -0.01, 0.01), R}};
 }
 
 }  // namespace cutsim::test

@@ -14,6 +14,7 @@
 #include "cutsim/tool/tool.h"
 #include "stock_impl.h"
 #include "voxel_kernels.h"
+#include "helpers.h"
 
 namespace cutsim::test {
 namespace {
@@ -302,27 +303,17 @@ TEST(VoxelKernels, QuarterBoundsGiveThePortableBits) {
 // A profile prism's distances four at a time (prism_distances) against
 // sweep::detail::prism_distance, to the bit: V and nose tools, moves along
 // the cutting direction, sheared sideways and back along it, a tilted
-// frame; points inside, beside, past the ends and beyond the box.
+// frame (prism_moves, and the snowflake's tool); points inside, beside,
+// past the ends and beyond the box.
 TEST(VoxelKernels, PrismDistancesGiveThePortableBits) {
-  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.5, Vec3(0.2, 1, 0.4).normalized()).toRotationMatrix();
-  struct Case {
-    const char* spec;
-    Vec3 move;
-    Eigen::Matrix3d frame;
-  };
-  const std::vector<Case> cases = {
-      {"vtool:angle=90,clearance=7,h=0.1,body=0.3", Vec3(0.05, 0, 0), Eigen::Matrix3d::Identity()},  // the snowflake's
-      {"vtool:angle=90,h=0.05", Vec3(0.02, 0.005, -0.003), Eigen::Matrix3d::Identity()},
-      {"vtool:angle=60,h=0.05", Vec3(-0.03, -0.01, 0.01), R},
-      {"nose:r=0.5,angle=100", Vec3(0.3, 0.02, -0.01), Eigen::Matrix3d::Identity()},
-      {"nose:r=0.05,angle=60", Vec3(0.1, 0.03, 0.08), R},
-  };
+  std::vector<PrismMove> cases = prism_moves();
+  cases.push_back({"vtool:angle=90,clearance=7,h=0.1,body=0.3", Vec3(0.05, 0, 0), Eigen::Matrix3d::Identity()});
   std::mt19937_64 rng(17);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   int prisms = 0, inside = 0, outside = 0, boxed = 0;
-  for (const Case& cs : cases) {
-    const sweep::Sweep sw = sweep::sweep_line(Vec3(0.01, -0.02, 0.03), Vec3(0.01, -0.02, 0.03) + cs.move, cs.frame,
-                                              tool::parse_tool_spec(cs.spec, "test"));
+  for (const PrismMove& cs : cases) {
+    const sweep::Sweep sw =
+        sweep::sweep_line(prism_start, prism_start + cs.move, cs.frame, tool::parse_tool_spec(cs.spec, "test"));
     for (const sweep::Primitive& piece : sw.prims) {
       const auto* pp = std::get_if<sweep::ProfilePrim>(&piece);
       if (!pp || !pp->prism) continue;
@@ -364,7 +355,7 @@ TEST(VoxelKernels, PrismDistancesGiveThePortableBits) {
       }
     }
   }
-  EXPECT_EQ(prisms, 5);
+  EXPECT_EQ(prisms, 6);
   EXPECT_GT(inside, 5000);
   EXPECT_GT(outside, 20000);
   EXPECT_GT(boxed, 100);  // some where the way to the box is the distance

@@ -505,23 +505,10 @@ TEST(Sweep, VToolPlaningPrismIsOneLipschitz) {
 // without the end's drift (shear), and inside the way to the nearer end.
 TEST(Sweep, ProfilePrismLiesAboveItsSectionBound) {
   std::mt19937_64 rng(23);
-  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.5, Vec3(0.2, 1, 0.4).normalized()).toRotationMatrix();
-  struct Case {
-    const char* spec;
-    Vec3 move;
-    Eigen::Matrix3d frame;
-  };
-  const std::vector<Case> cases = {
-      {"nose:r=0.5,angle=100", Vec3(0.3, 0.02, -0.01), Eigen::Matrix3d::Identity()},
-      {"nose:r=0.5,angle=100", Vec3(-0.2, -0.05, 0.04), Eigen::Matrix3d::Identity()},
-      {"nose:r=0.05,angle=60", Vec3(0.1, 0.03, 0.08), R},
-      {"vtool:angle=90,h=0.05", Vec3(0.02, 0.005, -0.003), Eigen::Matrix3d::Identity()},
-      {"vtool:angle=60,h=0.05", Vec3(0.03, -0.01, 0.01), R},
-  };
   int checked = 0, inside = 0, plane_above = 0, length_above = 0, past_used = 0, drift_needed = 0, end_inside = 0;
-  for (const Case& cs : cases) {
-    const sweep::Sweep s = sweep::sweep_line(Vec3(0.01, -0.02, 0.03), Vec3(0.01, -0.02, 0.03) + cs.move, cs.frame,
-                                             tool::parse_tool_spec(cs.spec, "test"));
+  for (const PrismMove& cs : prism_moves()) {
+    const sweep::Sweep s =
+        sweep::sweep_line(prism_start, prism_start + cs.move, cs.frame, tool::parse_tool_spec(cs.spec, "test"));
     ASSERT_EQ(s.prims.size(), 1u) << cs.spec;
     const auto& p = s.prims[0];
     const Aabb b = sweep::bounds(p).expanded(0.05);
