@@ -120,6 +120,13 @@ namespace {
   const __m256d inner = std_max_avx2(_mm256_sub_pd(_mm256_set1_pd(lo), p), _mm256_sub_pd(p, _mm256_set1_pd(hi)));
   return std_max_avx2(inner, _mm256_setzero_pd());
 }
+// sweep::detail::box_distance2 on four points: gx^2 + gy^2 + gz^2.
+[[gnu::target("avx2")]] inline __m256d box_distance2_avx2(__m256d x, __m256d y, __m256d z, const Aabb& box) {
+  const __m256d gx = box_gap_avx2(x, box.min.x(), box.max.x());
+  const __m256d gy = box_gap_avx2(y, box.min.y(), box.max.y());
+  const __m256d gz = box_gap_avx2(z, box.min.z(), box.max.z());
+  return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy)), _mm256_mul_pd(gz, gz));
+}
 }  // namespace
 
 [[gnu::target("avx2")]] std::uint64_t boxes_reach_avx2(const double* d, const double* need, const double* px,
@@ -134,10 +141,7 @@ namespace {
     // (0 < thr ? 0 : thr), _mm256_min_pd(zero, thr).)
     __m256d lim = _mm256_min_pd(_mm256_loadu_pd(need + b), db);
     if (inner) lim = _mm256_min_pd(zero, lim);
-    const __m256d gx = box_gap_avx2(_mm256_loadu_pd(px + b), box.min.x(), box.max.x());
-    const __m256d gy = box_gap_avx2(_mm256_loadu_pd(py + b), box.min.y(), box.max.y());
-    const __m256d gz = box_gap_avx2(_mm256_loadu_pd(pz + b), box.min.z(), box.max.z());
-    const __m256d b2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy)), _mm256_mul_pd(gz, gz));
+    const __m256d b2 = box_distance2_avx2(_mm256_loadu_pd(px + b), _mm256_loadu_pd(py + b), _mm256_loadu_pd(pz + b), box);
     // passed over: b2 > 0 && (lim <= 0 || b2 >= lim * lim); or d <= floor
     const __m256d far = _mm256_or_pd(_mm256_cmp_pd(lim, zero, _CMP_LE_OQ),
                                      _mm256_cmp_pd(b2, _mm256_mul_pd(lim, lim), _CMP_GE_OQ));
@@ -303,9 +307,8 @@ void prism_distances_scalar(const sweep::ProfilePrim& pp, int from, int n, const
     const __m256d inside_min = std_min_avx2(std_max_avx2(sec, along), zero);
     // Within the length (and not a tiny positive a): max(a, 0) + min(max(a, b), 0)
     const __m256d pos = _mm256_cmp_pd(sec, zero, _CMP_GT_OQ);
-    const __m256d short_way = _mm256_and_pd(_mm256_cmp_pd(along, zero, _CMP_LE_OQ),
-                                            _mm256_andnot_pd(_mm256_and_pd(pos, _mm256_cmp_pd(sec, tiny, _CMP_LT_OQ)),
-                                                             _mm256_castsi256_pd(_mm256_set1_epi64x(-1))));
+    const __m256d short_way = _mm256_andnot_pd(_mm256_and_pd(pos, _mm256_cmp_pd(sec, tiny, _CMP_LT_OQ)),
+                                               _mm256_cmp_pd(along, zero, _CMP_LE_OQ));
     const __m256d within = _mm256_add_pd(_mm256_blendv_pd(zero, sec, pos), inside_min);
     // Else prism_sd(a, b): hypot of the positive parts, plus the same min.
     const __m256d ao = std_max_avx2(sec, zero), bo = std_max_avx2(along, zero);
@@ -314,10 +317,7 @@ void prism_distances_scalar(const sweep::ProfilePrim& pp, int from, int n, const
     // Outside, no less than the way to the piece's box.
     const __m256d outside = _mm256_cmp_pd(r, zero, _CMP_GT_OQ);
     if (_mm256_movemask_pd(outside)) {
-      const __m256d gx = box_gap_avx2(wx, pp.bounds.min.x(), pp.bounds.max.x());
-      const __m256d gy = box_gap_avx2(wy, pp.bounds.min.y(), pp.bounds.max.y());
-      const __m256d gz = box_gap_avx2(wz, pp.bounds.min.z(), pp.bounds.max.z());
-      const __m256d b2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(gx, gx), _mm256_mul_pd(gy, gy)), _mm256_mul_pd(gz, gz));
+      const __m256d b2 = box_distance2_avx2(wx, wy, wz, pp.bounds);
       const __m256d farther = _mm256_and_pd(outside, _mm256_cmp_pd(b2, _mm256_mul_pd(r, r), _CMP_GT_OQ));
       r = _mm256_blendv_pd(r, _mm256_sqrt_pd(b2), farther);
     }
