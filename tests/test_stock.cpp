@@ -300,6 +300,67 @@ TEST(VoxelKernels, QuarterBoundsGiveThePortableBits) {
   EXPECT_GT(on_key, 100);
 }
 
+// The contact scan's voxels of a whole quarter (overlap_candidates)
+// against their definition voxel by voxel: material deeper than the floor
+// (-v > floor), and the region's plane above it there, -(c + g . y) >
+// floor with y = h (x - 1.5, y - 1.5, z - 1.5), summed (gx yx + gy yy) + gz yz.
+TEST(VoxelKernels, OverlapCandidatesGiveThePortableBits) {
+  std::mt19937_64 rng(31);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const double h = 0.0005;
+  auto offset = [&](int i) { return h * (i - 1.5); };
+  int set = 0, by_material = 0, by_plane = 0, on_material = 0, on_plane = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    std::array<float, 512> data{};
+    for (float& v : data) v = static_cast<float>((2 * u(rng) - 1) * 2 * h);
+    const int first = static_cast<int>(((rng() % 2) << 8) | ((rng() % 2) << 5) | ((rng() % 2) << 2));
+    auto value = [&](int q) { return data[static_cast<std::size_t>(first + ((q >> 4) << 6) + (((q >> 2) & 3) << 3) + (q & 3))]; };
+    auto dot = [&](const stock::detail::CentrePlane& p, int q) {
+      return p.gx * offset(q >> 4) + p.gy * offset((q >> 2) & 3) + p.gz * offset(q & 3);
+    };
+    Vec3 g(2 * u(rng) - 1, 2 * u(rng) - 1, 2 * u(rng) - 1);
+    g /= std::max(1.0, g.norm());
+    stock::detail::CentrePlane pl{(2 * u(rng) - 1) * h, g.x(), g.y(), g.z()};
+    double floor = (2 * u(rng) - 1) * h;
+    if (trial % 3 == 0) floor = -static_cast<double>(value(static_cast<int>(rng() % 64)));  // a voxel's material at the floor
+    if (trial % 3 == 1) {
+      // A voxel whose plane lies at the floor, exactly (c moved by an ulp
+      // or two till it does).
+      const int q = static_cast<int>(rng() % 64);
+      data[static_cast<std::size_t>(first + ((q >> 4) << 6) + (((q >> 2) & 3) << 3) + (q & 3))] = static_cast<float>(-(floor + h));
+      pl.c = -floor - dot(pl, q);
+      for (int i = 0; i < 8 && -(pl.c + dot(pl, q)) != floor; ++i)
+        pl.c = std::nextafter(pl.c, -(pl.c + dot(pl, q)) > floor ? 1.0 : -1.0);
+    }
+    const bool with_plane = trial % 4 != 3;
+    std::uint64_t want = 0;
+    for (int q = 0; q < 64; ++q) {
+      const double m = -static_cast<double>(value(q));
+      on_material += m == floor;
+      if (m <= floor) { ++by_material; continue; }
+      if (with_plane) {
+        const double r = -(pl.c + dot(pl, q));
+        on_plane += r == floor;
+        if (r <= floor) { ++by_plane; continue; }
+      }
+      want |= std::uint64_t(1) << q;
+    }
+    const auto* pp = with_plane ? &pl : nullptr;
+    ASSERT_EQ(want, stock::detail::overlap_candidates_scalar(data.data(), first, floor, pp, h)) << "trial " << trial;
+    ASSERT_EQ(want, stock::detail::overlap_candidates(data.data(), first, floor, pp, h)) << "trial " << trial;
+    if (stock::detail::cpu_has_avx2()) {
+      ASSERT_EQ(want, stock::detail::overlap_candidates_avx2(data.data(), first, floor, pp, h)) << "trial " << trial;
+    }
+    set += std::popcount(want);
+  }
+  // Both tests pass some voxels over and leave others, some at the floor exactly.
+  EXPECT_GT(set, 20000);
+  EXPECT_GT(by_material, 20000);
+  EXPECT_GT(by_plane, 10000);
+  EXPECT_GT(on_material, 500);
+  EXPECT_GT(on_plane, 300);
+}
+
 // A profile prism's distances four at a time (prism_distances) against
 // sweep::detail::prism_distance, to the bit: V and nose tools, moves along
 // the cutting direction, sheared sideways and back along it, a tilted

@@ -240,6 +240,61 @@ std::uint64_t quarter_reach(const float* data, int first, float gamma, double ke
   return quarter_reach_scalar(data, first, gamma, key, off, inner, sec, yx, yy, yz);
 }
 
+// The contact check's voxels of a quarter that may be deeper than the
+// deepest overlap so far: material, then the region's plane. Per voxel in
+// its loop, these two tests were a third of the contact scan's own time on
+// the snowflake; the loop now runs over the bits this leaves.
+namespace {
+// h (i - 1.5), a voxel's offset from its quarter's centre along one axis.
+double quarter_offset(int i, double h) { return h * (i - 1.5); }
+}  // namespace
+
+std::uint64_t overlap_candidates_scalar(const float* data, int first, double floor, const CentrePlane* pl, double h) {
+  std::uint64_t bits = 0;
+  for (int q = 0; q < 64; ++q) {
+    const int x = q >> 4, y = (q >> 2) & 3, z = q & 3;
+    bool keep = -static_cast<double>(data[first + (x << 6) + (y << 3) + z]) > floor;
+    if (keep && pl) {
+      const double yx = quarter_offset(x, h), yy = quarter_offset(y, h), yz = quarter_offset(z, h);
+      keep = -(pl->c + (pl->gx * yx + pl->gy * yy + pl->gz * yz)) > floor;
+    }
+    bits |= std::uint64_t(keep) << q;
+  }
+  return bits;
+}
+
+#if defined(__x86_64__)
+[[gnu::target("avx2")]] std::uint64_t overlap_candidates_avx2(const float* data, int first, double floor,
+                                                               const CentrePlane* pl, double h) {
+  const __m256d fl = _mm256_set1_pd(floor), neg = _mm256_set1_pd(-0.0);
+  const __m256d yz = _mm256_setr_pd(quarter_offset(0, h), quarter_offset(1, h), quarter_offset(2, h), quarter_offset(3, h));
+  std::uint64_t bits = 0;
+  for (int row = 0; row < 16; ++row) {
+    const int x = row >> 2, y = row & 3;
+    const __m256d v = _mm256_cvtps_pd(_mm_loadu_ps(data + first + (x << 6) + (y << 3)));
+    __m256d keep = _mm256_cmp_pd(_mm256_xor_pd(v, neg), fl, _CMP_GT_OQ);
+    int m = _mm256_movemask_pd(keep);
+    if (m && pl) {
+      const __m256d t = _mm256_add_pd(_mm256_set1_pd(pl->gx * quarter_offset(x, h) + pl->gy * quarter_offset(y, h)),
+                                      _mm256_mul_pd(_mm256_set1_pd(pl->gz), yz));
+      const __m256d below = _mm256_xor_pd(_mm256_add_pd(_mm256_set1_pd(pl->c), t), neg);
+      m &= _mm256_movemask_pd(_mm256_cmp_pd(below, fl, _CMP_GT_OQ));
+    }
+    bits |= static_cast<std::uint64_t>(m) << (4 * row);
+  }
+  return bits;
+}
+#else
+std::uint64_t overlap_candidates_avx2(const float* data, int first, double floor, const CentrePlane* pl, double h) {
+  return overlap_candidates_scalar(data, first, floor, pl, h);
+}
+#endif
+
+std::uint64_t overlap_candidates(const float* data, int first, double floor, const CentrePlane* pl, double h) {
+  if (avx2()) return overlap_candidates_avx2(data, first, floor, pl, h);
+  return overlap_candidates_scalar(data, first, floor, pl, h);
+}
+
 // A profile prism's distances (sweep::detail::prism_distance) at a
 // quarter's voxels. With AVX2, four at a time: both of the profile's cases
 // (nearest the nose's centre, or a side face) and both of the length's

@@ -50,6 +50,13 @@ void prism_distances(const sweep::ProfilePrim& pp, int n, const double* px, cons
 std::uint64_t quarter_reach(const float* data, int first, float gamma, double key, const double* off, bool inner,
                             const sweep::SectionPlane* sec, const double* yx, const double* yy, const double* yz);
 
+/// The voxels of a whole 4^3 quarter (bit q = 16 x + 4 y + z; voxel q at
+/// data[first + 64 x + 8 y + z]) that may overlap a region deeper than
+/// `floor`: their material is (-v > floor) and, given a plane bounding the
+/// region's depth (`pl`, or none), so is the plane there:
+/// -(c + (gx yx + gy yy + gz yz)) > floor, at the voxel's offset from the
+/// quarter's centre, y = h (x - 1.5, y - 1.5, z - 1.5).
+std::uint64_t overlap_candidates(const float* data, int first, double floor, const CentrePlane* pl, double h);
 /// Whether the CPU has AVX2 (false off x86-64).
 bool cpu_has_avx2();
 /// Whether the dispatching functions take the AVX2 versions: the CPU has
@@ -70,6 +77,8 @@ std::uint64_t quarter_reach_scalar(const float* data, int first, float gamma, do
                                    const double* yz);
 std::uint64_t quarter_reach_avx2(const float* data, int first, float gamma, double key, const double* off, bool inner,
                                  const sweep::SectionPlane* sec, const double* yx, const double* yy, const double* yz);
+std::uint64_t overlap_candidates_scalar(const float* data, int first, double floor, const CentrePlane* pl, double h);
+std::uint64_t overlap_candidates_avx2(const float* data, int first, double floor, const CentrePlane* pl, double h);
 void prism_distances_scalar(const sweep::ProfilePrim& pp, int from, int n, const double* px, const double* py,
                             const double* pz, double* out);
 void prism_distances_avx2(const sweep::ProfilePrim& pp, int n, const double* px, const double* py, const double* pz,
