@@ -18,10 +18,6 @@
 #include "stock_impl.h"
 #include "voxel_kernels.h"
 
-#if defined(__SSE2__)
-#include <xmmintrin.h>
-#endif
-
 namespace cutsim::stock {
 
 using detail::boxes_reach;
@@ -106,24 +102,14 @@ float float_below(double x) {
 
 // Smallest value of the 4^3 quarter of a leaf at offset (qx, qy, qz), the
 // same way: 16 rows of 4 into 4 lanes.
-// (GCC left the lanes scalar, one minss each, and the function a tenth
-// of the contact scan's time: with SSE, a row at a time; _mm_min_ps(r, l)
-// is r < l ? r : l, the same bits.)
 float quarter_min(const float* data, int qx, int qy, int qz) {
   const float* r0 = data + ((qx << 6) | (qy << 3) | qz);
   float lane[4] = {r0[0], r0[1], r0[2], r0[3]};
-#if defined(__SSE2__)
-  __m128 l = _mm_loadu_ps(lane);
-  for (int x = 0; x < 4; ++x)
-    for (int y = 0; y < 4; ++y) l = _mm_min_ps(_mm_loadu_ps(r0 + ((x << 6) | (y << 3))), l);
-  _mm_storeu_ps(lane, l);
-#else
   for (int x = 0; x < 4; ++x)
     for (int y = 0; y < 4; ++y) {
       const float* r = r0 + ((x << 6) | (y << 3));
       for (int k = 0; k < 4; ++k) lane[k] = r[k] < lane[k] ? r[k] : lane[k];
     }
-#endif
   return std::min(std::min(lane[0], lane[1]), std::min(lane[2], lane[3]));
 }
 
