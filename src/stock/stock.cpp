@@ -26,6 +26,7 @@ using detail::lower_by_ball_line;
 using detail::overlap_candidates;
 using detail::planes_below;
 using detail::prism_distances;
+using detail::quarter_offset;
 using detail::quarter_reach;
 using openvdb::Coord;
 using openvdb::CoordBBox;
@@ -1075,7 +1076,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
     std::array<Vec3, 64> quarter_y;
     std::array<double, 64> quarter_off, quarter_yx, quarter_yy, quarter_yz;  // (the offsets by field too)
     for (int q = 0; q < 64; ++q) {
-      quarter_y[q] = h * Vec3((q >> 4) - 1.5, ((q >> 2) & 3) - 1.5, (q & 3) - 1.5);
+      quarter_y[q] = Vec3(quarter_offset(q >> 4, h), quarter_offset((q >> 2) & 3, h), quarter_offset(q & 3, h));
       quarter_off[q] = quarter_y[q].norm();
       quarter_yx[q] = quarter_y[q].x();
       quarter_yy[q] = quarter_y[q].y();

@@ -244,11 +244,6 @@ std::uint64_t quarter_reach(const float* data, int first, float gamma, double ke
 // deepest overlap so far: material, then the region's plane. Per voxel in
 // its loop, these two tests were a third of the contact scan's own time on
 // the snowflake; the loop now runs over the bits this leaves.
-namespace {
-// h (i - 1.5), a voxel's offset from its quarter's centre along one axis.
-double quarter_offset(int i, double h) { return h * (i - 1.5); }
-}  // namespace
-
 std::uint64_t overlap_candidates_scalar(const float* data, int first, double floor, const CentrePlane* pl, double h) {
   std::uint64_t bits = 0;
   for (int q = 0; q < 64; ++q) {

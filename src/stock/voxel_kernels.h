@@ -11,6 +11,11 @@
 
 namespace cutsim::stock::detail {
 
+/// h (i - 1.5): the offset, along one axis, of a quarter's voxel i (0-3)
+/// from the quarter's centre, for voxels h apart. The update and the
+/// contact scan both take their voxels' offsets from here.
+inline double quarter_offset(int i, double h) { return h * (i - 1.5); }
+
 /// A convex piece's tangent plane at a quarter's centre, c + g . y.
 struct CentrePlane {
   double c, gx, gy, gz;
