@@ -203,43 +203,64 @@ TEST(Interference, FlankBodysTangentPlaneLiesBelowItsDistance) {
   EXPECT_EQ(terms.size(), 4u) << "each of the four terms largest somewhere";
 }
 
+const char* const kVTool = "vtool:angle=90,clearance=7,h=0.1,body=0.3";
+
+// A block planed by the V tool in five grooves along x, `pitch` apart and
+// `depth` deep, from x = -`half_length` to +`half_length`: cusps for its
+// flank body to touch.
+stock::Stock grooved_block(const Aabb& box, double voxel, double pitch, double depth, double half_length) {
+  stock::StockOptions so;
+  so.voxel_mm = voxel;
+  stock::Stock s(box, box, so);
+  const tool::Tool vt = tool::parse_tool_spec(kVTool, "test");
+  for (int k = 0; k < 5; ++k) {
+    const double y = pitch * (k - 2.5);
+    s.subtract(sweep::sweep_line(Vec3(-half_length, y, -depth), Vec3(half_length, y, -depth),
+                                 Eigen::Matrix3d::Identity(), vt));
+  }
+  return s;
+}
+
+// The V tool's flank body at a pose: its distance, its tangent plane (as
+// the contact check passes them to the scan) and its box.
+struct FlankAt {
+  const tool::FlankBody& f;
+  tool::FlankTrig trig;
+  Pose pose, inv;
+  FlankAt(const tool::FlankBody& body, const Pose& at) : f(body), trig(tool::flank_trig(body)), pose(at), inv(at.inverse()) {}
+  double operator()(const Vec3& x) const { return tool::flank_distance(f, trig, inv * x); }
+  double plane(const Vec3& x, Vec3* g) const {
+    Vec3 gl;
+    const double d = tool::flank_distance(f, trig, inv * x, &gl);
+    *g = pose.linear() * gl;
+    return d;
+  }
+  Aabb bounds() const { return sweep::world_box(tool::shape_bounds(tool::Shape(f)), pose.linear(), pose.translation()); }
+};
+
+// A pose along or across the grooves, turned about Z and tilted a little.
+Pose random_pose(std::mt19937& rng, const Vec3& centre, const Vec3& spread) {
+  std::uniform_real_distribution<double> u(-1, 1);
+  Pose pose = Pose::Identity();
+  pose.translate(centre + Vec3(spread.x() * u(rng), spread.y() * u(rng), spread.z() * u(rng)));
+  pose.rotate(Eigen::AngleAxisd(0.3 * u(rng), Vec3::UnitZ()) * Eigen::AngleAxisd(0.05 * u(rng), Vec3::UnitY()));
+  return pose;
+}
+
 // With the region's tangent plane (a convex region), the scan passes over
 // voxels without evaluating it, and must find the same deepest overlap.
 TEST(Interference, OverlapWithTheRegionsTangentPlaneIsTheSame) {
-  const Aabb box{Vec3(-1, -1, -0.5), Vec3(1, 1, 0)};
-  stock::StockOptions so;
-  so.voxel_mm = 0.005;
-  stock::Stock s(box, box, so);
-  // Grooves planed by a V tool leave cusps for the flank body to touch.
-  const tool::Tool vt = tool::parse_tool_spec("vtool:angle=90,clearance=7,h=0.1,body=0.3", "test");
-  for (int k = 0; k < 5; ++k) {
-    const double y = -0.1 + 0.04 * k;
-    s.subtract(sweep::sweep_line(Vec3(-0.8, y, -0.01), Vec3(0.8, y, -0.01), Eigen::Matrix3d::Identity(), vt));
-  }
-  const std::vector<tool::FlankBody> bodies = flank_bodies("vtool:angle=90,clearance=7,h=0.1,body=0.3");
+  const stock::Stock s = grooved_block(Aabb{Vec3(-1, -1, -0.5), Vec3(1, 1, 0)}, 0.005, 0.04, 0.01, 0.8);
+  const std::vector<tool::FlankBody> bodies = flank_bodies(kVTool);
   ASSERT_EQ(bodies.size(), 1u);
-  const tool::FlankBody* f = &bodies[0];
-  const tool::FlankTrig trig = tool::flank_trig(*f);
   int touched = 0;
   std::mt19937 rng(3);
-  std::uniform_real_distribution<double> u(-1, 1);
   for (int i = 0; i < 40; ++i) {
-    // Poses along and across the grooves, turned about Z and tilted.
-    Pose pose = Pose::Identity();
-    pose.translate(Vec3(0.5 * u(rng), 0.12 * u(rng), -0.012 + 0.004 * u(rng)));
-    pose.rotate(Eigen::AngleAxisd(0.3 * u(rng), Vec3::UnitZ()) * Eigen::AngleAxisd(0.05 * u(rng), Vec3::UnitY()));
-    const Pose inv = pose.inverse();
-    auto region = [&](const Vec3& x) { return tool::flank_distance(*f, trig, inv * x); };
-    auto plane = [&](const Vec3& x, Vec3* g) {
-      Vec3 gl;
-      const double d = tool::flank_distance(*f, trig, inv * x, &gl);
-      *g = pose.linear() * gl;
-      return d;
-    };
-    const Aabb bounds = sweep::world_box(tool::shape_bounds(tool::Shape(*f)),
-                                         pose.linear(), pose.translation());
-    const stock::Overlap a = s.overlap(bounds, region, nullptr, 0.0);
-    const stock::Overlap b = s.overlap(bounds, region, nullptr, 0.0, plane);
+    const FlankAt flank(bodies[0], random_pose(rng, Vec3(0, 0, -0.012), Vec3(0.5, 0.12, 0.004)));
+    auto region = [&](const Vec3& x) { return flank(x); };
+    auto plane = [&](const Vec3& x, Vec3* g) { return flank.plane(x, g); };
+    const stock::Overlap a = s.overlap(flank.bounds(), region, nullptr, 0.0);
+    const stock::Overlap b = s.overlap(flank.bounds(), region, nullptr, 0.0, plane);
     EXPECT_EQ(a.depth_mm, b.depth_mm) << "pose " << i;
     EXPECT_EQ(a.where, b.where) << "pose " << i;
     EXPECT_EQ(a.at_least, b.at_least);
@@ -247,6 +268,66 @@ TEST(Interference, OverlapWithTheRegionsTangentPlaneIsTheSame) {
   }
   EXPECT_GT(touched, 10);
   EXPECT_LT(touched, 40);
+}
+
+// With what the move removed so far 1-Lipschitz (a V tool's sweep along its
+// cutting direction), the scan passes over whole quarters lying deeper in
+// it than their reach. The deepest overlap must be the same as without, and
+// the deepest over every voxel by brute force.
+TEST(Interference, OverlapPassingOverQuartersTheMoveRemovedIsTheSame) {
+  // Grooves 30 um deep at a 30 um pitch, at 2.5 um voxels: quarters 10 um
+  // wide lie whole inside the cuts below the top.
+  const double h = 0.0025;
+  const stock::Stock s = grooved_block(Aabb{Vec3(-0.4, -0.3, -0.15), Vec3(0.4, 0.3, 0)}, h, 0.03, 0.03, 0.35);
+  const tool::Tool vt = tool::parse_tool_spec(kVTool, "test");
+  const std::vector<tool::FlankBody> bodies = flank_bodies(kVTool);
+  ASSERT_EQ(bodies.size(), 1u);
+  const double cap = s.band_mm() * (1 - 1e-6);
+  const Vec3 o = s.roi_lattice_origin();
+  int touched = 0, changed = 0;
+  std::mt19937 rng(5);
+  for (int i = 0; i < 24; ++i) {
+    const FlankAt flank(bodies[0], random_pose(rng, Vec3(0, 0, -0.03), Vec3(0.2, 0.08, 0.01)));
+    const Pose& pose = flank.pose;
+    // The cut up to this pose: 60 um along the tool's x, one way or the other.
+    const Vec3 run = (i % 2 ? 0.06 : -0.06) * pose.linear().col(0);
+    const sweep::Sweep cut = sweep::sweep_line(pose.translation() - run, pose.translation(), pose.linear(), vt);
+    ASSERT_FALSE(cut.prims.empty());
+    for (const sweep::Primitive& p : cut.prims) ASSERT_TRUE(sweep::lipschitz(p)) << "pose " << i;
+    auto region = [&](const Vec3& x) { return flank(x); };
+    auto plane = [&](const Vec3& x, Vec3* g) { return flank.plane(x, g); };
+    auto removed = [&](const Vec3& x, double) { return cut.distance(x); };
+    const Aabb bounds = flank.bounds();
+    const stock::Overlap none = s.overlap(bounds, region, nullptr, 0.0, plane);
+    const stock::Overlap a = s.overlap(bounds, region, removed, 0.0, plane);
+    const stock::Overlap b = s.overlap(bounds, region, removed, 0.0, plane, true);
+    const stock::Overlap c = s.overlap(bounds, region, removed, 0.0, nullptr, true);
+    EXPECT_EQ(a.depth_mm, b.depth_mm) << "pose " << i;
+    EXPECT_EQ(a.where, b.where) << "pose " << i;
+    EXPECT_EQ(a.stock_value, b.stock_value) << "pose " << i;
+    EXPECT_EQ(a.at_least, b.at_least) << "pose " << i;
+    EXPECT_EQ(a.depth_mm, c.depth_mm) << "pose " << i;
+    EXPECT_EQ(a.where, c.where) << "pose " << i;
+    // Every voxel of the region's box.
+    double deepest = 0;
+    const Eigen::Vector3i lo = ((bounds.min - o) / h).array().floor().cast<int>().cwiseMax(0);
+    const Eigen::Vector3i hi = ((bounds.max - o) / h).array().ceil().cast<int>();
+    for (int x = lo.x(); x <= hi.x(); ++x)
+      for (int y = lo.y(); y <= hi.y(); ++y)
+        for (int z = lo.z(); z <= hi.z(); ++z) {
+          const Vec3 p = o + h * Vec3(x, y, z);
+          if (p.z() > h) continue;
+          const double mat = std::max(s.sample(p), -cut.distance(p));
+          double depth = std::min(-region(p), -mat);
+          if (depth >= cap) depth = s.band_mm();
+          deepest = std::max(deepest, depth);
+        }
+    EXPECT_NEAR(b.depth_mm, deepest, 1e-12) << "pose " << i;
+    touched += b.depth_mm > 0;
+    changed += b.depth_mm != none.depth_mm;
+  }
+  EXPECT_GT(touched, 4);
+  EXPECT_GT(changed, 4) << "the cut must matter to the answer";
 }
 
 TEST(Interference, ShankContactWhereABallMillPlungesPastItsFlutes) {

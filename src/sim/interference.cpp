@@ -97,15 +97,20 @@ void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, con
     // What the cutting part removed from the move's start to this pose.
     auto so_far = std::make_shared<sweep::Sweep>();
     if (!rapid) *so_far = planner_.sweep_part(m, pm, tool, 0.0, s);
+    // Its distance bounds whole quarters of a scan where its pieces' do.
+    const bool so_far_lipschitz =
+        std::all_of(so_far->prims.begin(), so_far->prims.end(), [](const auto& p) { return sweep::lipschitz(p); });
     for (std::size_t i = 0; i < regions.size(); ++i) {
       if (!boxes[i].overlaps(reach)) continue;
       // The scan owns what it needs: it may run after this walk.
-      on_scan(regions[i].name, k, [this, so_far, box = boxes[i], at = at[i], shape = regions[i].shape,
+      on_scan(regions[i].name, k, [this, so_far, so_far_lipschitz, box = boxes[i], at = at[i], shape = regions[i].shape,
                                    sw = std::move(sweeps[i])]() {
         using Removed = std::function<double(const Vec3&, double)>;
         const Removed removed =
             so_far->prims.empty() ? Removed() : Removed([&](const Vec3& x, double) { return so_far->distance(x); });
-        if (!sw.prims.empty()) return stock_.overlap(box, [&](const Vec3& x) { return sw.distance(x); }, removed, tol_);
+        const bool lip = removed && so_far_lipschitz;
+        if (!sw.prims.empty())
+          return stock_.overlap(box, [&](const Vec3& x) { return sw.distance(x); }, removed, tol_, nullptr, lip);
         if (const auto* flank = std::get_if<tool::FlankBody>(&shape)) {
           // Convex: its tangent plane bounds the scan's quarters (with its
           // angles' sines worked out once for the pose).
@@ -119,10 +124,11 @@ void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, con
                 const double d = tool::flank_distance(*flank, trig, inv * x, &gl);
                 *g = rot * gl;
                 return d;
-              });
+              },
+              lip);
         }
         return stock_.overlap(box, [&, inv = at.inverse()](const Vec3& x) { return tool::shape_distance(shape, inv * x); },
-                              removed, tol_);
+                              removed, tol_, nullptr, lip);
       });
     }
   }

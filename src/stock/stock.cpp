@@ -1743,7 +1743,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
 
 Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3&)>& region,
                        const std::function<double(const Vec3&, double)>& removed, double min_depth_mm,
-                       const std::function<double(const Vec3&, Vec3*)>& region_plane) const {
+                       const std::function<double(const Vec3&, Vec3*)>& region_plane, bool removed_lipschitz) const {
   const Impl& m = *impl_;
   Overlap best;
   const Aabb wb = bounds.intersected(m.box.expanded(m.h));
@@ -1819,6 +1819,15 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
             const double rq_low = rq - kPlaneMargin;
             if (-rq + hq <= floor) continue;
             if (plane && -(rq_low - 1.5 * m.h * gq.cwiseAbs().sum()) <= floor) continue;
+            // A whole quarter deeper in what was removed than its reach: at
+            // every voxel `removed` is at most the floor (most quarters the
+            // flank of a V tool reaches, just behind its edge: the snowflake's
+            // contact scans passed over three quarters of their voxels so).
+            const bool whole = qb == CoordBBox::createCube(q0, 4);
+            if (removed_lipschitz && whole) {
+              const double lim = floor - hq * (1 + 1e-12) - kPlaneMargin;
+              if (removed(cq, lim) <= lim) continue;
+            }
             // A voxel: its tests against the floor as it stands, then the region.
             auto visit = [&](int x, int y, int z) {
               double mat = data ? static_cast<double>(data[((x - o.x()) << 6) | ((y - o.y()) << 3) | (z - o.z())])
@@ -1859,7 +1868,7 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
                 floor = depth;
               }
             };
-            if (data && qb == CoordBBox::createCube(q0, 4)) {
+            if (data && whole) {
               // A whole quarter: the voxels whose material and plane pass
               // the floor at its start, in the loop's order (the floor only
               // rises, so a voxel passed over then stays passed over). The
