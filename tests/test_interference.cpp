@@ -330,6 +330,44 @@ TEST(Interference, OverlapPassingOverQuartersTheMoveRemovedIsTheSame) {
   EXPECT_GT(changed, 4) << "the cut must matter to the answer";
 }
 
+// The scan lists its leaves through 128^3, 32^3 and 16^3 cubes, each kept
+// only where the region can reach it. A ball a few voxels across, deep in
+// the material, reaches one to eight leaves wherever it lies (across the
+// corners of the 16^3 cubes too): its deepest voxel must be found each time.
+TEST(Interference, OverlapOfASmallRegionIsFoundWhereverItLies) {
+  const Aabb box{Vec3(0, 0, -0.6), Vec3(0.6, 0.6, 0)};
+  stock::StockOptions so;
+  so.voxel_mm = 0.01;
+  const stock::Stock s(box, box, so);
+  const double h = so.voxel_mm, cap = s.band_mm() * (1 - 1e-6);
+  const Vec3 o = s.roi_lattice_origin();
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int i = 0; i < 300; ++i) {
+    // Every other ball centred on a corner of the 16^3 cubes (a voxel
+    // centre plus half a voxel), the rest anywhere.
+    Vec3 c(0.1 + 0.4 * u(rng), 0.1 + 0.4 * u(rng), -0.5 + 0.4 * u(rng));
+    if (i % 2 == 0) c = o + h * (16 * ((c - o) / (16 * h)).array().round() - 0.5).matrix();
+    const double r = (1 + 1.5 * u(rng)) * h;
+    auto sd = [&](const Vec3& x) { return (x - c).norm() - r; };
+    const Aabb bounds{c.array() - r, c.array() + r};
+    const stock::Overlap ov = s.overlap(bounds, sd, nullptr, 0.0);
+    double deepest = 0;
+    const Eigen::Vector3i lo = ((bounds.min - o) / h).array().floor().cast<int>();
+    const Eigen::Vector3i hi = ((bounds.max - o) / h).array().ceil().cast<int>();
+    for (int x = lo.x(); x <= hi.x(); ++x)
+      for (int y = lo.y(); y <= hi.y(); ++y)
+        for (int z = lo.z(); z <= hi.z(); ++z) {
+          const Vec3 p = o + h * Vec3(x, y, z);
+          double depth = std::min(-sd(p), -s.sample(p));
+          if (depth >= cap) depth = s.band_mm();
+          deepest = std::max(deepest, depth);
+        }
+    ASSERT_GT(deepest, 0) << "ball " << i;
+    EXPECT_NEAR(ov.depth_mm, deepest, 1e-12) << "ball " << i << " at (" << c.transpose() << ")";
+  }
+}
+
 TEST(Interference, ShankContactWhereABallMillPlungesPastItsFlutes) {
   TempDir dir;
   // Flutes 1 mm long, a 3 mm shank above them: plunging 1.5 mm buries the
