@@ -150,12 +150,14 @@ void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep
               CoordBBox mid = CoordBBox::createCube(Coord(x2, y2, z2), kMid);
               mid.intersect(part);
               if (mid.empty()) continue;
-              auto leaves_of = [&](const CoordBBox& blk) {
+              // The leaves of `blk` that `take(x, y, z)` (their first voxel) accepts, in x, y, z order.
+              auto leaves_of = [&](const CoordBBox& blk, auto take) {
                 const Coord p0(blk.min().x() & ~(kLeafDim - 1), blk.min().y() & ~(kLeafDim - 1),
                                blk.min().z() & ~(kLeafDim - 1));
                 for (int x = p0.x(); x <= blk.max().x(); x += kLeafDim)
                   for (int y = p0.y(); y <= blk.max().y(); y += kLeafDim)
-                    for (int z = p0.z(); z <= blk.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
+                    for (int z = p0.z(); z <= blk.max().z(); z += kLeafDim)
+                      if (take(x, y, z)) leaf(Coord(x, y, z));
               };
               if constexpr (!kSubLevel) {
                 // The 16^3 cubes tested first (with a hair of slack, so that
@@ -173,12 +175,7 @@ void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep
                       kept[sx][sy][sz] = !sub.empty() && keep(centre(so.x(), so.y(), so.z(), kSub),
                                                               hd3 * (1 + 1e-12) + 1e-12, so, kSub);
                     }
-                const Coord p0(mid.min().x() & ~(kLeafDim - 1), mid.min().y() & ~(kLeafDim - 1),
-                               mid.min().z() & ~(kLeafDim - 1));
-                for (int x = p0.x(); x <= mid.max().x(); x += kLeafDim)
-                  for (int y = p0.y(); y <= mid.max().y(); y += kLeafDim)
-                    for (int z = p0.z(); z <= mid.max().z(); z += kLeafDim)
-                      if (kept[(x - x2) / kSub][(y - y2) / kSub][(z - z2) / kSub]) leaf(Coord(x, y, z));
+                leaves_of(mid, [&](int x, int y, int z) { return kept[(x - x2) / kSub][(y - y2) / kSub][(z - z2) / kSub]; });
                 continue;
               }
               const Coord s0(mid.min().x() & ~(kSub - 1), mid.min().y() & ~(kSub - 1), mid.min().z() & ~(kSub - 1));
@@ -188,7 +185,7 @@ void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep
                     if (!keep(centre(x3, y3, z3, kSub), hd3, Coord(x3, y3, z3), kSub)) continue;
                     CoordBBox sub = CoordBBox::createCube(Coord(x3, y3, z3), kSub);
                     sub.intersect(mid);
-                    if (!sub.empty()) leaves_of(sub);
+                    if (!sub.empty()) leaves_of(sub, [](int, int, int) { return true; });
                   }
             }
       }
@@ -1840,9 +1837,9 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
             if (-rq + hq <= floor) continue;
             if (plane && -(rq_low - 1.5 * m.h * gq.cwiseAbs().sum()) <= floor) continue;
             // A whole quarter deeper in what was removed than its reach: at
-            // every voxel `removed` is at most the floor (most quarters the
-            // flank of a V tool reaches, just behind its edge: the snowflake's
-            // contact scans passed over three quarters of their voxels so).
+            // every voxel `removed` is at most the floor. (The flank of a V
+            // tool lies just behind its edge: on the snowflake, three in four
+            // of the scans' evaluations of `removed` were in such quarters.)
             const bool whole = qb == CoordBBox::createCube(q0, 4);
             if (removed_lipschitz && whole) {
               const double lim = floor - hq * (1 + 1e-12) - kPlaneMargin;
