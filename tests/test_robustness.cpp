@@ -167,6 +167,34 @@ TEST(Memory, JobOverTheLimitIsRefusedWithTheFigureAndAVoxelThatFits) {
   EXPECT_TRUE(!fs::exists(dir.file("out")) || fs::is_empty(dir.file("out")));
 }
 
+TEST(Degenerate, VoxelFinerThanTheGridCanHoldIsRefused) {
+  // OpenVDB's transform takes no voxel under 3e-15 mm^3 (0.0144 um): a
+  // 0.01 um voxel is a clear error, with nothing written; 0.02 um runs.
+  TempDir dir;
+  const auto prog = dir.write("p.nc", "G0 X0 Y0 Z1\nG1 Z-0.0001 F100\nG1 X0.001\n");
+  std::string err;
+  EXPECT_EQ(run_cli("run " + prog + " --tool ball:d=0.002 --stock-box=-0.003,-0.003,-0.002,0.003,0.003,0 --voxel 0.00001 -o " +
+                        dir.file("fine"),
+                    nullptr, &err),
+            65);
+  EXPECT_NE(err.find("voxel size 0.01 um is finer than the stock grid can hold (0.015 um at least)"), std::string::npos)
+      << err;
+  EXPECT_FALSE(fs::exists(dir.file("fine")));
+  EXPECT_EQ(run_cli("run " + prog + " --tool ball:d=0.002 --stock-box=-0.003,-0.003,-0.002,0.003,0.003,0 --voxel 0.00002 -o " +
+                        dir.file("ok"),
+                    nullptr, &err),
+            0)
+      << err;
+  EXPECT_TRUE(fs::exists(dir.file("ok/p.glb")));
+  // In a job file: the error at the key.
+  dir.write("p.toml", "[stock]\nbox = [-0.003, -0.003, -0.002, 0.003, 0.003, 0]\n[simulation]\nvoxel_mm = 0.00001\n");
+  EXPECT_EQ(run_cli("run " + prog + " --tool ball:d=0.002 -o " + dir.file("job"), nullptr, &err), 78);
+  EXPECT_NE(err.find("p.toml:4:12: error: voxel_mm 1e-05 is finer than the stock grid can hold (1.5e-05 mm at least)"),
+            std::string::npos)
+      << err;
+  EXPECT_FALSE(fs::exists(dir.file("job")));
+}
+
 }  // namespace
 }  // namespace cutsim::test
 

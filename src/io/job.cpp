@@ -9,6 +9,7 @@
 #include "cutsim/config/toml_context.h"
 
 #include "cutsim/core/error.h"
+#include "cutsim/core/geometry.h"
 
 namespace cutsim::io {
 
@@ -192,6 +193,11 @@ Job load_job(const std::string& path) {
     if (auto* v = s->get("voxel_mm")) {
       job.voxel_mm = ctx.number(*v, "voxel_mm");
       if (!(*job.voxel_mm > 0)) ctx.fail(v->source(), "voxel_mm must be positive");
+      if (*job.voxel_mm < kFinestVoxelMm) {
+        std::ostringstream os;
+        os << "voxel_mm " << *job.voxel_mm << " is finer than the stock grid can hold (" << kFinestVoxelMm << " mm at least)";
+        ctx.fail(v->source(), os.str());
+      }
     }
     if (auto* v = s->get("start")) job.start_mm = ctx.vec3(*v, "start");
     if (auto* v = s->get("memory_limit_mb")) {

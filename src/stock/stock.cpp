@@ -445,6 +445,13 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
     throw GeometryError({}, "the stock box is empty");
   if (!(opt.voxel_mm > 0) || !std::isfinite(opt.voxel_mm))
     throw GeometryError({}, "voxel size must be positive");
+  // (Finer ended in OpenVDB's "Non-zero scale values required", an internal error.)
+  if (opt.voxel_mm < kFinestVoxelMm) {
+    std::ostringstream os;
+    os << "voxel size " << opt.voxel_mm * 1000 << " um is finer than the stock grid can hold (" << kFinestVoxelMm * 1000
+       << " um at least)";
+    throw GeometryError({}, os.str());
+  }
   Impl& m = *impl_;
   m.box = box;
   m.h = opt.voxel_mm;

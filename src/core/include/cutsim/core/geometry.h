@@ -12,6 +12,9 @@ using Vec3 = Eigen::Vector3d;
 using Pose = Eigen::Isometry3d;
 
 constexpr double kPi = 3.14159265358979323846;
+/// The finest voxel the stock grid takes, mm: OpenVDB's transform refuses a
+/// voxel whose volume (in the grid's unit, mm) is below 3e-15 (h < 0.0144 um).
+constexpr double kFinestVoxelMm = 1.5e-5;
 inline double deg_to_rad(double deg) { return deg * kPi / 180.0; }
 inline double rad_to_deg(double rad) { return rad * 180.0 / kPi; }
 /// sqrt(a^2 + b^2) for mm-sized values: std::hypot guards against overflow
