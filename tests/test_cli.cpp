@@ -352,6 +352,37 @@ TEST(Cli, BenchRunsTheCasesOfAFolder) {
   EXPECT_EQ(run_cli("bench nope --dir " + dir.path().string(), &out, &err), 66);
 }
 
+// Where the JSON cannot go, the bench says so before it runs a case (a
+// bench takes minutes), and leaves nothing; a folder that is missing is
+// made, and holds only the JSON when the bench is done.
+TEST(Cli, BenchChecksWhereItsJsonGoesBeforeRunning) {
+  TempDir dir;
+  dir.write("slot.nc", "G0 X-2 Y0 Z1\nG1 Z-0.1 F100\nG1 X2\nG0 Z1\nM30\n");
+  dir.write("slot.toml", "[stock]\nbox = [-1, -1, -1, 1, 1, 0]\n[tool]\nspec = \"flat:d=1\"\n[simulation]\nvoxel_mm = 0.02\n");
+  dir.write("plain", "a file, not a folder\n");
+  const std::string cmd = "bench --dir " + dir.path().string() + " --repeat 1 --threads 1 --band-every 0 --json ";
+  std::string out, err;
+  // Under a plain file: no folder can be made there.
+  EXPECT_EQ(run_cli(cmd + dir.file("plain") + "/b.json", &out, &err), 73);
+  EXPECT_NE(err.find(dir.file("plain")), std::string::npos) << err;
+  EXPECT_EQ(out.find("kernel: "), std::string::npos) << out;  // nothing measured, no case run
+  // A folder in the JSON's place.
+  std::filesystem::create_directory(dir.file("taken.json"));
+  EXPECT_EQ(run_cli(cmd + dir.file("taken.json"), &out, &err), 73);
+  EXPECT_NE(err.find("is a directory"), std::string::npos) << err;
+  EXPECT_EQ(out.find("kernel: "), std::string::npos) << out;
+  EXPECT_TRUE(std::filesystem::is_empty(dir.file("taken.json")));
+  // A missing folder is made; once done it holds the JSON and nothing else
+  // (no temporary file left beside it).
+  const std::string json = dir.file("results/deeper/b.json");
+  ASSERT_EQ(run_cli(cmd + json, &out, &err), 0) << err;
+  EXPECT_NE(out.find("\nslot "), std::string::npos) << out;
+  EXPECT_EQ(nlohmann::json::parse(slurp(json))[0]["case"], "slot");
+  std::size_t files = 0;
+  for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator(dir.file("results/deeper"))) ++files;
+  EXPECT_EQ(files, 1u);
+}
+
 // GLIBC_TUNABLES gains glibc.malloc.hugetlb=1 once; a value the user set
 // stands, whatever it is.
 TEST(HugePages, TunableAddedOnceAndTheUsersStands) {

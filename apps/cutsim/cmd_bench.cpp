@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -139,6 +140,18 @@ Action add_bench_command(CLI::App& app) {
       if (!fs::exists(nc)) throw InputError(nc.string(), "no such case (its program is missing)");
       if (!fs::exists(fs::path(nc).replace_extension(".toml"))) throw InputError(nc.string(), "the case has no job file beside it");
     }
+    // The JSON's place, made ready before any case runs (a bench takes
+    // minutes): its folder created if missing, the file written beside it
+    // under a temporary name and renamed into place only when every case
+    // has run. A run that fails leaves neither.
+    std::optional<io::OutputDirectory> json_dir;
+    std::optional<io::AtomicFile> json_file;
+    if (!a->json.empty()) {
+      std::error_code ec;
+      if (fs::is_directory(a->json, ec)) throw OutputError(a->json, "is a directory, not a file for the JSON");
+      if (const fs::path parent = fs::path(a->json).parent_path(); !parent.empty()) json_dir.emplace(parent.string());
+      json_file.emplace(a->json);
+    }
     const int threads = a->threads > 0 ? a->threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     // The kernel, measured before each timed run (the machine's speed
     // drifts by some 10 % over minutes, and a case's runs take minutes): a
@@ -153,6 +166,14 @@ Action add_bench_command(CLI::App& app) {
     const char* od = ::mkdtemp(tmpl);
     if (!od) throw OutputError("/tmp", "cannot create a temporary directory");
     const std::string outdir = od;
+    // (Removed however the bench ends.)
+    struct RemoveAll {
+      std::string dir;
+      ~RemoveAll() {
+        std::error_code ec;
+        fs::remove_all(dir, ec);
+      }
+    } remove_outdir{outdir};
 
     nlohmann::ordered_json rows = nlohmann::ordered_json::array();
     // (The runs inherit this process's GLIBC_TUNABLES, and with it malloc's pages.)
@@ -165,7 +186,6 @@ Action add_bench_command(CLI::App& app) {
     std::printf("%-20s %8s %8s %8s %12s %8s %7s %9s %10s %10s %6s %6s %11s %11s %11s %8s %6s\n", "case", "blocks",
                 "moves", "voxel_um", "active_vox", "wall_s", "rss_MB", "moves/s", "eval/s", "vox_upd/s", "/kern", "eval%",
                 "removed_mm3", "over_mm3", "under_mm3", "contacts", "axis");
-    int worst = 0;
     for (const auto& c : cases) {
       const std::string nc = (fs::path(a->dir) / (c + ".nc")).string();
       std::vector<double> walls, sims, upds, kernels;
@@ -185,12 +205,9 @@ Action add_bench_command(CLI::App& app) {
                                        " -o " + quote(outdir),
                                    out, err);
         if (code != 0 && code != 1) {
-          std::error_code ec;
-          fs::remove_all(outdir, ec);
           throw Error(static_cast<ExitCode>(code > 0 ? code : 70), SourceLocation{nc, 0, 0, {}},
                       "case " + c + " failed (exit " + std::to_string(code) + "): " + err);
         }
-        worst = std::max(worst, code);
         if (counting) {
           const nlohmann::json cr = nlohmann::json::parse(out);
           band = cr.value("band_voxels", 0.0);
@@ -267,9 +284,11 @@ Action add_bench_command(CLI::App& app) {
                   row["undercut_mm3"].get<double>(), rep["contacts"].size(), rep["axis_limit_violations"].size());
       std::fflush(stdout);
     }
-    std::error_code ec;
-    fs::remove_all(outdir, ec);
-    if (!a->json.empty()) io::write_file_atomic(a->json, rows.dump(2) + "\n");
+    if (json_file) {
+      const std::string text = rows.dump(2) + "\n";
+      json_file->write(text.data(), text.size());
+      json_file->commit();
+    }
     return 0;
   };
 }
