@@ -352,6 +352,42 @@ TEST(Cli, BenchRunsTheCasesOfAFolder) {
   EXPECT_EQ(run_cli("bench nope --dir " + dir.path().string(), &out, &err), 66);
 }
 
+// A case's [bench] goals: each figure against its goal, in the JSON and in
+// a line after the table; a bad goal is refused at its place before any
+// case runs.
+TEST(Cli, BenchPrintsTheFiguresAgainstTheJobsGoals) {
+  TempDir dir;
+  dir.write("slot.nc", "G0 X-2 Y0 Z1\nG1 Z-0.1 F100\nG1 X2\nG0 Z1\nM30\n");
+  // A goal no run can miss (a terabyte) and one none can meet (a move a picosecond).
+  const std::string job = "[stock]\nbox = [-1, -1, -1, 1, 1, 0]\n[tool]\nspec = \"flat:d=1\"\n[simulation]\nvoxel_mm = 0.02\n"
+                          "[bench]\nmax_rss_mb = 1e6\nmin_moves_per_s = 1e12\n";
+  dir.write("slot.toml", job);
+  const std::string cmd = "bench --dir " + dir.path().string() + " --repeat 1 --threads 1 --band-every 0 --json ";
+  std::string out, err;
+  ASSERT_EQ(run_cli(cmd + dir.file("b.json"), &out, &err), 0) << err;
+  const auto row = nlohmann::json::parse(slurp(dir.file("b.json")))[0];
+  ASSERT_TRUE(row.contains("goals")) << row.dump();
+  const auto& g = row["goals"];
+  EXPECT_FALSE(g.contains("wall_s"));  // not set, not judged
+  EXPECT_EQ(g["peak_rss_mb"]["value"], row["peak_rss_mb"]);
+  EXPECT_EQ(g["peak_rss_mb"]["goal"], 1e6);
+  EXPECT_EQ(g["peak_rss_mb"]["met"], true);
+  EXPECT_DOUBLE_EQ(g["peak_rss_mb"]["factor"].get<double>(), row["peak_rss_mb"].get<double>() / 1e6);
+  EXPECT_EQ(g["moves_per_s"]["value"], row["moves_per_s"]);
+  EXPECT_EQ(g["moves_per_s"]["met"], false);
+  EXPECT_DOUBLE_EQ(g["moves_per_s"]["factor"].get<double>(), 1e12 / row["moves_per_s"].get<double>());
+  EXPECT_NE(out.find("goals ([bench] in each case's job):\n  slot "), std::string::npos) << out;
+  EXPECT_NE(out.find("peak RSS "), std::string::npos) << out;
+  EXPECT_NE(out.find("(at most 1000000 MB): met; moves/s "), std::string::npos) << out;
+  EXPECT_NE(out.find("(at least 1000000000000): not met, "), std::string::npos) << out;
+  // A goal that is no goal: refused at its place, before anything runs.
+  dir.write("slot.toml", job + "max_wall_s = 0\n");
+  EXPECT_EQ(run_cli(cmd + dir.file("c.json"), &out, &err), 78);
+  EXPECT_NE(err.find("slot.toml:10:14: error: max_wall_s must be positive"), std::string::npos) << err;
+  EXPECT_EQ(out.find("kernel: "), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(dir.file("c.json")));
+}
+
 // Where the JSON cannot go, the bench says so before it runs a case (a
 // bench takes minutes), and leaves nothing; a folder that is missing is
 // made, and holds only the JSON when the bench is done.

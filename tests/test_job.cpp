@@ -48,6 +48,36 @@ TEST(Job, UnknownToolKindIsAConfigErrorAtTheSpec) {
   }
 }
 
+// [bench]: the goals `cutsim bench` prints a case's figures against; each
+// optional, each a positive number, nothing else in the table.
+TEST(Job, BenchGoalsAreReadAndCheckedAtTheirPlace) {
+  TempDir dir;
+  {
+    const io::Job j = io::load_job(dir.write("g.toml", "[bench]\nmax_wall_s = 10\nmin_moves_per_s = 1e5\n"));
+    ASSERT_TRUE(j.bench);
+    EXPECT_DOUBLE_EQ(*j.bench->max_wall_s, 10);
+    EXPECT_FALSE(j.bench->max_rss_mb);
+    EXPECT_DOUBLE_EQ(*j.bench->min_moves_per_s, 1e5);
+    EXPECT_FALSE(io::load_job(dir.write("none.toml", "[stock]\nbox = [0,0,0,1,1,1]\n")).bench);
+  }
+  auto fails_at = [&](const std::string& text, int line, int column, const std::string& what) {
+    try {
+      io::load_job(dir.write("bad.toml", text));
+      ADD_FAILURE() << "accepted: " << text;
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.where().line, line) << text;
+      EXPECT_EQ(e.where().column, column) << text;
+      EXPECT_NE(e.message().find(what), std::string::npos) << e.message();
+      EXPECT_EQ(e.code(), ExitCode::config);
+    }
+  };
+  fails_at("[bench]\nmax_wall_s = 10\nmax_rss_mb = 0\n", 3, 14, "max_rss_mb must be positive");
+  fails_at("[bench]\nmin_moves_per_s = -5\n", 2, 19, "min_moves_per_s must be positive");
+  fails_at("[bench]\nmax_wall_s = \"ten\"\n", 2, 14, "max_wall_s must be a finite number");
+  fails_at("[bench]\nmax_wall = 10\n", 2, 1, "max_wall");
+  fails_at("bench = 3\n", 1, 9, "[bench] must be a table");
+}
+
 TEST(Job, TomlSyntaxErrorHasLineAndColumn) {
   TempDir dir;
   const auto p = dir.write("j.toml", "[stock]\nbox = [0,0,0,1,1,\n");

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <sys/wait.h>
@@ -20,6 +21,7 @@
 #include "cutsim/core/error.h"
 #include "cutsim/core/huge_pages.h"
 #include "cutsim/io/atomic_file.h"
+#include "cutsim/io/job.h"
 #include "cutsim/sweep/sweep.h"
 
 namespace cutsim::app {
@@ -135,10 +137,15 @@ Action add_bench_command(CLI::App& app) {
           cases.push_back(e.path().stem().string());
       std::sort(cases.begin(), cases.end());
     }
+    // Each case's goals ([bench] in its job), read before any case runs:
+    // a job the runs would refuse is refused here, at its line.
+    std::vector<io::BenchGoals> goals;
     for (const auto& c : cases) {
       const fs::path nc = fs::path(a->dir) / (c + ".nc");
       if (!fs::exists(nc)) throw InputError(nc.string(), "no such case (its program is missing)");
-      if (!fs::exists(fs::path(nc).replace_extension(".toml"))) throw InputError(nc.string(), "the case has no job file beside it");
+      const fs::path job = fs::path(nc).replace_extension(".toml");
+      if (!fs::exists(job)) throw InputError(nc.string(), "the case has no job file beside it");
+      goals.push_back(io::load_job(job.string()).bench.value_or(io::BenchGoals{}));
     }
     // The JSON's place, made ready before any case runs (a bench takes
     // minutes): its folder created if missing, the file written beside it
@@ -260,6 +267,25 @@ Action add_bench_command(CLI::App& app) {
       row["voxel_updates_per_s"] = vps;
       row["kernel_updates_per_s"] = kernel;
       row["malloc_huge_pages"] = huge;
+      // The figures against the case's goals (printed after the table).
+      {
+        const io::BenchGoals& g = goals[static_cast<std::size_t>(&c - cases.data())];
+        nlohmann::ordered_json gj = nlohmann::ordered_json::object();
+        auto against = [&](const char* figure, double value, double goal, bool at_most) {
+          nlohmann::ordered_json e;
+          e["value"] = value;
+          e["goal"] = goal;
+          e["at_most"] = at_most;
+          e["met"] = at_most ? value <= goal : value >= goal;
+          // How far off: the factor the figure must improve by (1 or less: met).
+          e["factor"] = at_most ? value / goal : (value > 0 ? goal / value : std::numeric_limits<double>::infinity());
+          gj[figure] = e;
+        };
+        if (g.max_wall_s) against("wall_s", wall, *g.max_wall_s, true);
+        if (g.max_rss_mb) against("peak_rss_mb", rss, *g.max_rss_mb, true);
+        if (g.min_moves_per_s) against("moves_per_s", row["moves_per_s"].get<double>(), *g.min_moves_per_s, false);
+        if (!gj.empty()) row["goals"] = gj;
+      }
       row["update_to_kernel"] = kernel > 0 ? vps / kernel : 0;
       row["evaluated_fraction"] = band > 0 ? evals / band : 0;
       row["removed_mm3"] = rep["removed_volume_mm3"];
@@ -283,6 +309,31 @@ Action add_bench_command(CLI::App& app) {
                   rep["removed_volume_mm3"].get<double>(), row["overcut_mm3"].get<double>(),
                   row["undercut_mm3"].get<double>(), rep["contacts"].size(), rep["axis_limit_violations"].size());
       std::fflush(stdout);
+    }
+    // The goals the cases' jobs set, one line a case.
+    bool header = false;
+    for (const auto& row : rows) {
+      if (!row.contains("goals")) continue;
+      if (!header) std::printf("goals ([bench] in each case's job):\n");
+      header = true;
+      std::string line;
+      for (const auto& [figure, e] : row["goals"].items()) {
+        const double v = e["value"].get<double>(), goal = e["goal"].get<double>(), f = e["factor"].get<double>();
+        const bool at_most = e["at_most"].get<bool>();
+        const char* name = figure == "wall_s" ? "wall" : figure == "peak_rss_mb" ? "peak RSS" : "moves/s";
+        const char* unit = figure == "wall_s" ? " s" : figure == "peak_rss_mb" ? " MB" : "";
+        char buf[200];
+        if (e["met"].get<bool>())
+          std::snprintf(buf, sizeof buf, "%s%s %.*f%s (%s %.*f%s): met", line.empty() ? "" : "; ", name,
+                        figure == "wall_s" ? 2 : 0, v, unit, at_most ? "at most" : "at least", figure == "wall_s" ? 2 : 0,
+                        goal, unit);
+        else
+          std::snprintf(buf, sizeof buf, "%s%s %.*f%s (%s %.*f%s): not met, %.2fx off", line.empty() ? "" : "; ", name,
+                        figure == "wall_s" ? 2 : 0, v, unit, at_most ? "at most" : "at least",
+                        figure == "wall_s" ? 2 : 0, goal, unit, f);
+        line += buf;
+      }
+      std::printf("  %-18s %s\n", row["case"].get<std::string>().c_str(), line.c_str());
     }
     if (json_file) {
       const std::string text = rows.dump(2) + "\n";

@@ -49,7 +49,23 @@ Job load_job(const std::string& path) {
   const toml::table root = ctx.parse();
   Job job;
   job.source = path;
-  ctx.only_keys(root, {"program", "machine", "stock", "tool", "simulation", "target", "report"}, "the job");
+  ctx.only_keys(root, {"program", "machine", "stock", "tool", "simulation", "target", "report", "bench"}, "the job");
+  if (auto* bt = root["bench"].as_table()) {
+    ctx.only_keys(*bt, {"max_wall_s", "max_rss_mb", "min_moves_per_s"}, "[bench]");
+    BenchGoals g;
+    auto goal = [&](const char* key, std::optional<double>& out) {
+      if (auto* v = bt->get(key)) {
+        out = ctx.number(*v, key);
+        if (!(*out > 0)) ctx.fail(v->source(), std::string(key) + " must be positive");
+      }
+    };
+    goal("max_wall_s", g.max_wall_s);
+    goal("max_rss_mb", g.max_rss_mb);
+    goal("min_moves_per_s", g.min_moves_per_s);
+    job.bench = g;
+  } else if (root.contains("bench")) {
+    ctx.fail(root.get("bench")->source(), "[bench] must be a table");
+  }
   if (auto* rt = root["report"].as_table()) {
     ctx.only_keys(*rt, {"profile"}, "[report]");
     if (auto* pv = rt->get("profile")) {

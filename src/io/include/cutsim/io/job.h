@@ -20,6 +20,14 @@ struct ProfileSpec {
   double from = 0, to = 0, step = 0;  ///< mm along `along`
 };
 
+/// What a reference case is held to ([bench]): `cutsim bench` prints each
+/// figure against its goal; `cutsim run` does not read it.
+struct BenchGoals {
+  std::optional<double> max_wall_s;       ///< end-to-end wall seconds (the bench's wall_s)
+  std::optional<double> max_rss_mb;       ///< peak resident memory, MB (the bench's rss_MB)
+  std::optional<double> min_moves_per_s;  ///< moves over the simulation's seconds (the bench's moves/s)
+};
+
 struct Job {
   std::string source;                ///< job file path, empty if none
   std::optional<Aabb> stock_box;     ///< [stock] box = [xmin,ymin,zmin,xmax,ymax,zmax], mm
@@ -43,6 +51,7 @@ struct Job {
   double target_scale = 1.0;                     ///< [target] scale: file units to mm (0.001 for um)
   std::optional<double> tolerance_mm;            ///< [target] tolerance_mm
   std::optional<ProfileSpec> profile;            ///< [report] profile = { along, at, from, to, step }
+  std::optional<BenchGoals> bench;               ///< [bench] max_wall_s, max_rss_mb, min_moves_per_s
 };
 
 /// Reads a job file.
