@@ -322,16 +322,17 @@ Action add_bench_command(CLI::App& app) {
         const bool at_most = e["at_most"].get<bool>();
         const char* name = figure == "wall_s" ? "wall" : figure == "peak_rss_mb" ? "peak RSS" : "moves/s";
         const char* unit = figure == "wall_s" ? " s" : figure == "peak_rss_mb" ? " MB" : "";
+        const int digits = figure == "wall_s" ? 2 : 0;
         char buf[200];
-        if (e["met"].get<bool>())
-          std::snprintf(buf, sizeof buf, "%s%s %.*f%s (%s %.*f%s): met", line.empty() ? "" : "; ", name,
-                        figure == "wall_s" ? 2 : 0, v, unit, at_most ? "at most" : "at least", figure == "wall_s" ? 2 : 0,
-                        goal, unit);
-        else
-          std::snprintf(buf, sizeof buf, "%s%s %.*f%s (%s %.*f%s): not met, %.2fx off", line.empty() ? "" : "; ", name,
-                        figure == "wall_s" ? 2 : 0, v, unit, at_most ? "at most" : "at least",
-                        figure == "wall_s" ? 2 : 0, goal, unit, f);
+        std::snprintf(buf, sizeof buf, "%s%s %.*f%s (%s %.*f%s): ", line.empty() ? "" : "; ", name, digits, v, unit,
+                      at_most ? "at most" : "at least", digits, goal, unit);
         line += buf;
+        if (e["met"].get<bool>()) {
+          line += "met";
+        } else {
+          std::snprintf(buf, sizeof buf, "not met, %.2fx off", f);
+          line += buf;
+        }
       }
       std::printf("  %-18s %s\n", row["case"].get<std::string>().c_str(), line.c_str());
     }
