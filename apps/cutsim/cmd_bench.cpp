@@ -119,7 +119,7 @@ Action add_bench_command(CLI::App& app) {
   cmd->add_option("cases", a->cases, "case names: DIR/<name>.nc with DIR/<name>.toml (default: every such pair in DIR)");
   cmd->add_option("--repeat", a->repeat, "runs per case; times are medians")->check(kPositive);
   cmd->add_option("--threads", a->threads, "worker threads (default: all cores)")->check(kNonNegative);
-  cmd->add_option("--json", a->json, "also write the table as JSON to this file");
+  cmd->add_option("--json", a->json, "also write the table as JSON to this file (its folder made if missing; checked before any case runs)");
   cmd->add_option("--dir", a->dir, "folder of the cases (default: ncprograms)");
   cmd->add_option("--voxel", a->voxel, "voxel size for every case, mm (default: each job's own)")
       ->check(kPositive);
