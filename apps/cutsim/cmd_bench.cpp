@@ -183,6 +183,7 @@ Action add_bench_command(CLI::App& app) {
     } remove_outdir{outdir};
 
     nlohmann::ordered_json rows = nlohmann::ordered_json::array();
+    std::vector<std::pair<std::string, std::string>> goal_lines;  // (case, its goals' line)
     // (The runs inherit this process's GLIBC_TUNABLES, and with it malloc's pages.)
     const bool huge = malloc_huge_pages();
     std::printf("kernel: %.3g voxel updates/s on %d thread%s (ball-end distance, max, write back, in cache; "
@@ -267,24 +268,44 @@ Action add_bench_command(CLI::App& app) {
       row["voxel_updates_per_s"] = vps;
       row["kernel_updates_per_s"] = kernel;
       row["malloc_huge_pages"] = huge;
-      // The figures against the case's goals (printed after the table).
+      // The figures against the case's goals: in the row, and as a line
+      // printed after the table.
       {
         const io::BenchGoals& g = goals[static_cast<std::size_t>(&c - cases.data())];
         nlohmann::ordered_json gj = nlohmann::ordered_json::object();
-        auto against = [&](const char* figure, double value, double goal, bool at_most) {
+        std::string line;
+        auto against = [&](const char* figure, const char* name, const char* unit, int digits, double value, double goal,
+                           bool at_most) {
+          const bool met = at_most ? value <= goal : value >= goal;
+          // How far off: the factor the figure must improve by (1 or less: met).
+          const double factor =
+              at_most ? value / goal : (value > 0 ? goal / value : std::numeric_limits<double>::infinity());
           nlohmann::ordered_json e;
           e["value"] = value;
           e["goal"] = goal;
           e["at_most"] = at_most;
-          e["met"] = at_most ? value <= goal : value >= goal;
-          // How far off: the factor the figure must improve by (1 or less: met).
-          e["factor"] = at_most ? value / goal : (value > 0 ? goal / value : std::numeric_limits<double>::infinity());
+          e["met"] = met;
+          e["factor"] = factor;
           gj[figure] = e;
+          char buf[200];
+          std::snprintf(buf, sizeof buf, "%s%s %.*f%s (%s %.*f%s): ", line.empty() ? "" : "; ", name, digits, value, unit,
+                        at_most ? "at most" : "at least", digits, goal, unit);
+          line += buf;
+          if (met) {
+            line += "met";
+          } else {
+            std::snprintf(buf, sizeof buf, "not met, %.2fx off", factor);
+            line += buf;
+          }
         };
-        if (g.max_wall_s) against("wall_s", wall, *g.max_wall_s, true);
-        if (g.max_rss_mb) against("peak_rss_mb", rss, *g.max_rss_mb, true);
-        if (g.min_moves_per_s) against("moves_per_s", row["moves_per_s"].get<double>(), *g.min_moves_per_s, false);
-        if (!gj.empty()) row["goals"] = gj;
+        if (g.max_wall_s) against("wall_s", "wall", " s", 2, wall, *g.max_wall_s, true);
+        if (g.max_rss_mb) against("peak_rss_mb", "peak RSS", " MB", 0, rss, *g.max_rss_mb, true);
+        if (g.min_moves_per_s)
+          against("moves_per_s", "moves/s", "", 0, row["moves_per_s"].get<double>(), *g.min_moves_per_s, false);
+        if (!gj.empty()) {
+          row["goals"] = gj;
+          goal_lines.emplace_back(c, line);
+        }
       }
       row["update_to_kernel"] = kernel > 0 ? vps / kernel : 0;
       row["evaluated_fraction"] = band > 0 ? evals / band : 0;
@@ -311,31 +332,8 @@ Action add_bench_command(CLI::App& app) {
       std::fflush(stdout);
     }
     // The goals the cases' jobs set, one line a case.
-    bool header = false;
-    for (const auto& row : rows) {
-      if (!row.contains("goals")) continue;
-      if (!header) std::printf("goals ([bench] in each case's job):\n");
-      header = true;
-      std::string line;
-      for (const auto& [figure, e] : row["goals"].items()) {
-        const double v = e["value"].get<double>(), goal = e["goal"].get<double>(), f = e["factor"].get<double>();
-        const bool at_most = e["at_most"].get<bool>();
-        const char* name = figure == "wall_s" ? "wall" : figure == "peak_rss_mb" ? "peak RSS" : "moves/s";
-        const char* unit = figure == "wall_s" ? " s" : figure == "peak_rss_mb" ? " MB" : "";
-        const int digits = figure == "wall_s" ? 2 : 0;
-        char buf[200];
-        std::snprintf(buf, sizeof buf, "%s%s %.*f%s (%s %.*f%s): ", line.empty() ? "" : "; ", name, digits, v, unit,
-                      at_most ? "at most" : "at least", digits, goal, unit);
-        line += buf;
-        if (e["met"].get<bool>()) {
-          line += "met";
-        } else {
-          std::snprintf(buf, sizeof buf, "not met, %.2fx off", f);
-          line += buf;
-        }
-      }
-      std::printf("  %-18s %s\n", row["case"].get<std::string>().c_str(), line.c_str());
-    }
+    if (!goal_lines.empty()) std::printf("goals ([bench] in each case's job):\n");
+    for (const auto& [name, line] : goal_lines) std::printf("  %-18s %s\n", name.c_str(), line.c_str());
     if (json_file) {
       const std::string text = rows.dump(2) + "\n";
       json_file->write(text.data(), text.size());
