@@ -376,8 +376,7 @@ std::vector<File> blade_files() {
     s += "\n[simulation]\nvoxel_mm = 0.001\nstart = [0, 0, 3]\n\n"
          "[target]\nfile = \"../models/cases/blade.ply\"\ntolerance_mm = 0.002\n";
     if (!errors)
-      s += "\n[bench]                # issue 7's goal, on a 2-core machine (cutsim bench prints the distance)\n"
-           "max_wall_s = 60\nmax_rss_mb = 4096\n";
+      s += bench_table("max_wall_s = 60\nmax_rss_mb = 4096\n");
     return s;
   };
   const std::string prog = program(o, false);

@@ -164,9 +164,8 @@ std::vector<File> snowflake_files() {
       "[stock]\nbox = [-25, -25, -10, 25, 25, 0]     # 50 x 50 x 10 mm; the crystal at the centre of the top\n\n"
       "[tool]\nspec = \"vtool:angle=90,clearance=7,h=0.1,body=0.3\"   # 90 deg V diamond tool, planing; 0.1 mm of edge\n\n"
       "[simulation]\nvoxel_mm = 0.0005\nstart = [0, 0, 0.1]\n\n"
-      "[target]\nfile = \"../models/cases/snowflake.ply\"\ntolerance_mm = 0.0005\n\n"
-      "[bench]                # issue 7's goal, on a 2-core machine (cutsim bench prints the distance)\n"
-      "max_wall_s = 10\nmax_rss_mb = 2048\n";
+      "[target]\nfile = \"../models/cases/snowflake.ply\"\ntolerance_mm = 0.0005\n" +
+      bench_table("max_wall_s = 10\nmax_rss_mb = 2048\n");
   const auto xs = graded_axis(-25, 25, -kRim - 0.01, kRim + 0.01, 0.002, 2.0);
   const TriMesh m = height_field_solid(xs, xs, target_z, -10);
   return {{"ncprograms/snowflake.toml", job, true},

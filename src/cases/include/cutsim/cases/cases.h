@@ -39,6 +39,10 @@ std::string num(double v, int decimals = 6);
 TriMesh height_field_solid(const std::vector<double>& xs, const std::vector<double>& ys,
                            const std::function<double(double, double)>& f, double z_bottom);
 
+/// A job's [bench] table holding issue 7's goals (`keys`: its lines,
+/// e.g. "max_wall_s = 10\n"), with the comment every such table carries.
+std::string bench_table(const std::string& keys);
+
 /// Binary little-endian PLY with double positions.
 std::string ply_binary(const TriMesh& m);
 
