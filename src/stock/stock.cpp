@@ -496,6 +496,10 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
   auto sd_at = [&](const Vec3& local) { return box_signed_distance(box, m.origin + local); };
   const Vec3 box_c = box.center(), box_half = 0.5 * (box.max - box.min);
   std::vector<Coord> leaf_origins;
+  // (Tiles through an accessor, which keeps the path down from the root
+  // between neighbours: the blade's listing at 1 um, which makes most of
+  // its deep leaves tiles, 0.46-0.60 s -> 0.38-0.41 s.)
+  openvdb::tree::ValueAccessor<openvdb::FloatTree> tiles(tree);
   const Coord lo = m.grid_index.min(), hi = m.grid_index.max();
   const Coord lo1(lo.x() & ~(kNode1Dim - 1), lo.y() & ~(kNode1Dim - 1), lo.z() & ~(kNode1Dim - 1));
   const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * m.h;
@@ -511,7 +515,7 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
         const double s1 = sd_at(c1);
         if (s1 > g + hd1) continue;
         if (s1 < -(g + hd1) && part == nb) {
-          tree.addTile(2, nb.min(), -m.gamma, false);
+          tiles.addTile(2, nb.min(), -m.gamma, false);
           continue;
         }
         const Coord p0(part.min().x() & ~(kLeafDim - 1), part.min().y() & ~(kLeafDim - 1), part.min().z() & ~(kLeafDim - 1));
@@ -533,12 +537,13 @@ Stock::Stock(const Aabb& box, const Aabb& roi_in, const StockOptions& opt) : imp
               const double depth = (cmin - box.min).cwiseMin(box.max - cmax).minCoeff();
               if (static_cast<float>(gap) >= m.gamma) continue;  // air
               if (static_cast<float>(depth) >= m.gamma && lpart == lb) {
-                tree.addTile(1, lb.min(), -m.gamma, false);
+                tiles.addTile(1, lb.min(), -m.gamma, false);
                 continue;
               }
               leaf_origins.emplace_back(x, y, z);
             }
       }
+  tiles.clear();
   // The leaves are made on both threads, then put in the tree on one: the
   // blade's box at 1 um has about a million, and making them (2 KB each,
   // first touched) cost two thirds of the build on one thread.
