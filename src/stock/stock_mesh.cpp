@@ -1,10 +1,10 @@
 // Surface extraction: the grid's zero level set clipped to the ROI, plus the
 // analytic box faces outside the ROI.
 #include <openvdb/tools/Interpolation.h>
-#include <openvdb/tools/VolumeToMesh.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "level_set_mesher.h"
 #include "stock_impl.h"
 
 namespace cutsim::stock {
@@ -60,16 +60,12 @@ void add_rect(TriMesh& mesh, int k, double c, bool positive, double u0, double u
 
 TriMesh Stock::surface_mesh(double adaptivity) const {
   const Impl& m = *impl_;
-  std::vector<openvdb::Vec3s> points;
-  std::vector<openvdb::Vec3I> tris;
-  std::vector<openvdb::Vec4I> quads;
-  openvdb::tools::volumeToMesh(*m.grid, points, tris, quads, 0.0, adaptivity);
+  const detail::LevelSetMesh raw = detail::mesh_level_set(m.grid->tree(), adaptivity);
 
   TriMesh mesh;
-  mesh.positions.resize(points.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1 << 16), [&](const auto& range) {
-    for (std::size_t i = range.begin(); i != range.end(); ++i)
-      mesh.positions[i] = m.origin + Vec3(points[i].x(), points[i].y(), points[i].z());
+  mesh.positions.resize(raw.points.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, raw.points.size(), 1 << 16), [&](const auto& range) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) mesh.positions[i] = m.origin + m.h * raw.points[i];
   });
 
   // Clip to the ROI cell box where it lies inside the stock box; elsewhere
@@ -93,7 +89,7 @@ TriMesh Stock::surface_mesh(double adaptivity) const {
       beyond[i] = bits;
     }
   });
-  mesh.triangles.reserve(tris.size() + 2 * quads.size());
+  mesh.triangles.reserve(raw.triangles.size());
   std::vector<Vec3> poly;
   auto clip = [&](const std::array<std::uint32_t, 3>& t) {
     const std::uint8_t any = beyond[t[0]] | beyond[t[1]] | beyond[t[2]];
@@ -109,12 +105,7 @@ TriMesh Stock::surface_mesh(double adaptivity) const {
     for (const Vec3& p : poly) mesh.positions.push_back(p);
     for (std::uint32_t i = 1; i + 1 < poly.size(); ++i) mesh.triangles.push_back({base, base + i, base + i + 1});
   };
-  // OpenVDB winds its polygons clockwise seen from outside: flip them.
-  for (const auto& t : tris) clip({t[0], t[2], t[1]});
-  for (const auto& q : quads) {
-    clip({q[0], q[2], q[1]});
-    clip({q[0], q[3], q[2]});
-  }
+  for (const auto& t : raw.triangles) clip(t);
   // Drop vertices no triangle uses (the clipped-away ones), keeping order.
   {
     std::vector<std::uint32_t> remap(mesh.positions.size(), UINT32_MAX);
