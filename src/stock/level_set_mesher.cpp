@@ -11,6 +11,7 @@
 #include "level_set_mesher.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <stdexcept>
 #include <unordered_map>
@@ -120,21 +121,33 @@ struct Chunk {
   std::size_t merged = 0;
 };
 
-// The leaf's voxels from -1 to 8 along each axis.
-void gather(const LeafInfo& info, const std::vector<const LeafT*>& leaves, float* v) {
+// The leaf's voxels from -1 to 8 along each axis, and which are inside.
+struct Block {
+  std::array<float, kBlock * kBlock * kBlock> v;
+  // in[x + 1][y + 1], bit z + 1: voxel (x, y, z) is inside (below 0).
+  std::array<std::array<std::uint16_t, kBlock>, kBlock> in;
+};
+constexpr std::uint16_t kAllIn = (1u << kBlock) - 1;
+
+void gather(const LeafInfo& info, const std::vector<const LeafT*>& leaves, Block& b) {
   const float* data[27];
   for (int s = 0; s < 27; ++s) data[s] = info.nb[static_cast<std::size_t>(s)] >= 0
                                              ? leaves[static_cast<std::size_t>(info.nb[static_cast<std::size_t>(s)])]->buffer().data()
                                              : nullptr;
+  auto tile = [&](int s) { return info.tile[static_cast<std::size_t>(s)]; };
   for (int x = -1; x <= 8; ++x) {
     const int sx = slot_of(x), lx = x & 7;
     for (int y = -1; y <= 8; ++y) {
       const int sy = slot_of(y), ly = y & 7;
-      float* row = v + block_index(x, y, -1);
-      for (int z = -1; z <= 8; ++z) {
-        const int s = slot_index(sx, sy, slot_of(z));
-        row[z + 1] = data[s] ? data[s][cell_index(lx, ly, z & 7)] : info.tile[static_cast<std::size_t>(s)];
-      }
+      float* row = b.v.data() + block_index(x, y, -1);
+      const int s0 = slot_index(sx, sy, 0), s1 = s0 + 1, s2 = s0 + 2;
+      row[0] = data[s0] ? data[s0][cell_index(lx, ly, 7)] : tile(s0);
+      if (data[s1]) std::copy_n(data[s1] + cell_index(lx, ly, 0), 8, row + 1);
+      else std::fill_n(row + 1, 8, tile(s1));
+      row[9] = data[s2] ? data[s2][cell_index(lx, ly, 0)] : tile(s2);
+      std::uint16_t bits = 0;
+      for (int z = 0; z < kBlock; ++z) bits |= static_cast<std::uint16_t>((row[z] < 0 ? 1u : 0u) << z);
+      b.in[static_cast<std::size_t>(x + 1)][static_cast<std::size_t>(y + 1)] = bits;
     }
   }
 }
@@ -209,9 +222,21 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity) {
   std::vector<const LeafT*> leaves;
   leaves.reserve(tree.leafCount());
   for (auto l = tree.cbeginLeaf(); l; ++l) leaves.push_back(l.getLeaf());
-  std::unordered_map<Coord, std::int32_t> index_of;  // (OpenVDB's std::hash<Coord>)
-  index_of.reserve(leaves.size());
-  for (std::size_t i = 0; i < leaves.size(); ++i) index_of.emplace(leaves[i]->origin(), static_cast<std::int32_t>(i));
+  // Leaf indices by origin: a table of 16^3 leaves per 128^3 node, the
+  // nodes in a hash (a leaf's neighbours are nearly all in its own node).
+  constexpr int kNodeLeaves = 16 * 16 * 16;
+  std::unordered_map<Coord, std::size_t> node_of;  // (OpenVDB's std::hash<Coord>)
+  std::vector<std::int32_t> node_tables;
+  auto node_origin = [](const Coord& o) { return Coord(o.x() & ~127, o.y() & ~127, o.z() & ~127); };
+  auto in_node = [](const Coord& o) {
+    return static_cast<std::size_t>((((o.x() & 127) >> 3) << 8) | (((o.y() & 127) >> 3) << 4) | ((o.z() & 127) >> 3));
+  };
+  for (std::size_t i = 0; i < leaves.size(); ++i) {
+    const Coord o = leaves[i]->origin();
+    auto [it, fresh] = node_of.emplace(node_origin(o), node_tables.size());
+    if (fresh) node_tables.resize(node_tables.size() + kNodeLeaves, -1);
+    node_tables[it->second + in_node(o)] = static_cast<std::int32_t>(i);
+  }
 
   const std::size_t n_chunks = (leaves.size() + kChunk - 1) / kChunk;
   std::vector<LeafInfo> infos(leaves.size());
@@ -222,7 +247,9 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity) {
   // Pass 1: neighbours, cells, points.
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_chunks, 1), [&](const auto& range) {
     openvdb::tree::ValueAccessor<const openvdb::FloatTree> acc(tree);
-    std::vector<float> v(kBlock * kBlock * kBlock);
+    Block blk;
+    Coord cached_node(INT32_MAX);
+    const std::int32_t* cached_table = nullptr;
     std::array<std::uint8_t, 512> cfg{};
     std::array<std::array<double, 3>, 512> point{};
     std::array<std::array<float, 3>, 512> normal{};
@@ -241,34 +268,51 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity) {
             continue;
           }
           const Coord o = origin.offsetBy((s / 9 - 1) * 8, ((s / 3) % 3 - 1) * 8, (s % 3 - 1) * 8);
-          const auto it = index_of.find(o);
-          info.nb[su] = it == index_of.end() ? -1 : it->second;
+          const Coord n = node_origin(o);
+          if (n != cached_node) {
+            cached_node = n;
+            const auto it = node_of.find(n);
+            cached_table = it == node_of.end() ? nullptr : node_tables.data() + it->second;
+          }
+          info.nb[su] = cached_table ? cached_table[in_node(o)] : -1;
           if (info.nb[su] < 0) info.tile[su] = acc.getValue(o);
         }
-        gather(info, leaves, v.data());
+        gather(info, leaves, blk);
         bool any_in = false, any_out = false;
-        for (float x : v) (x < 0 ? any_in : any_out) = true;
+        for (const auto& col : blk.in)
+          for (std::uint16_t r : col) {
+            any_in = any_in || r != 0;
+            any_out = any_out || r != kAllIn;
+          }
         info.mixed = any_in && any_out;
         info.boundary_begin = info.boundary_end = static_cast<std::uint32_t>(chunk.boundary.size());
         if (!info.mixed) continue;
 
-        // The leaf's own cells.
+        // The leaf's own cells: those whose eight corners are not all on
+        // one side, found a row of eight at a time.
         bool any_cell = false;
+        cfg.fill(0);
+        rep.fill(kNoCell);
         for (int x = 0; x < 8; ++x)
-          for (int y = 0; y < 8; ++y)
-            for (int z = 0; z < 8; ++z) {
+          for (int y = 0; y < 8; ++y) {
+            const auto ux = static_cast<std::size_t>(x + 1), uy = static_cast<std::size_t>(y + 1);
+            const unsigned r00 = blk.in[ux][uy], r10 = blk.in[ux + 1][uy], r01 = blk.in[ux][uy + 1], r11 = blk.in[ux + 1][uy + 1];
+            const unsigned any = r00 | r10 | r01 | r11, all = r00 & r10 & r01 & r11;
+            unsigned cells = (((any | (any >> 1)) & ~(all & (all >> 1))) >> 1) & 0xffu;  // bit z: cell z
+            while (cells) {
+              const int z = std::countr_zero(cells);
+              cells &= cells - 1;
               const int i = cell_index(x, y, z);
               float cv[8];
-              const std::uint8_t k = cell_config(v.data(), x, y, z, cv);
+              const std::uint8_t k = cell_config(blk.v.data(), x, y, z, cv);
               cfg[static_cast<std::size_t>(i)] = k;
-              rep[static_cast<std::size_t>(i)] = kNoCell;
-              if (k == 0 || k == 255) continue;
               any_cell = true;
               double p[3];
               cell_point(cv, k, p);
               point[static_cast<std::size_t>(i)] = {x + p[0], y + p[1], z + p[2]};
               cell_normal(cv, normal[static_cast<std::size_t>(i)].data());
             }
+          }
         sums.clear();
         counts.clear();
         auto add_to = [&](std::uint16_t id, const std::array<double, 3>& p) {
@@ -310,7 +354,7 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity) {
                     const auto& n = normal[ci];
                     if (n[0] * mean[0] + n[1] * mean[1] + n[2] * mean[2] < min_dot) return false;
                   }
-              return block_is_simple(v.data(), x, y, z, s);
+              return block_is_simple(blk.v.data(), x, y, z, s);
             };
             // A block of s cells with no cell, or merged: its parent may merge.
             std::array<bool, 64> open2{};
@@ -377,13 +421,16 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity) {
 
         // Cells whose first corner lies in a tile, where this leaf holds
         // the first of their corners that lies in a leaf.
-        for (int x = -1; x < 8; ++x)
+        bool lower_tile = false;  // a neighbour below in x, y or z without a leaf
+        for (int s = 0; s < 27; ++s)
+          if (s / 9 <= 1 && (s / 3) % 3 <= 1 && s % 3 <= 1 && info.nb[static_cast<std::size_t>(s)] < 0) lower_tile = true;
+        for (int x = -1; x < 8 && lower_tile; ++x)
           for (int y = -1; y < 8; ++y)
             for (int z = -1; z < 8; ++z) {
               if (x >= 0 && y >= 0 && z >= 0) continue;
               if (info.nb[static_cast<std::size_t>(slot_index(slot_of(x), slot_of(y), slot_of(z)))] >= 0) continue;
               float cv[8];
-              const std::uint8_t k = cell_config(v.data(), x, y, z, cv);
+              const std::uint8_t k = cell_config(blk.v.data(), x, y, z, cv);
               if (k == 0 || k == 255) continue;
               int owner = -1;
               for (int o = 0; o < 8 && owner < 0; ++o) {
@@ -431,13 +478,13 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity) {
 
   // Pass 2: a polygon per sign-changing edge.
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_chunks, 1), [&](const auto& range) {
-    std::vector<float> v(kBlock * kBlock * kBlock);
+    Block blk;
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
       Chunk& chunk = chunks[c];
       for (std::size_t li = c * kChunk; li < std::min(leaves.size(), (c + 1) * kChunk); ++li) {
         const LeafInfo& info = infos[li];
         if (!info.mixed) continue;
-        gather(info, leaves, v.data());
+        gather(info, leaves, blk);
         const Coord origin = leaves[li]->origin();
         // The point of the cell whose first corner is g (-1..7, leaf-local).
         auto point_of = [&](int gx, int gy, int gz) -> std::uint32_t {
@@ -463,48 +510,70 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity) {
           }
           throw std::logic_error("surface mesh: a sign-changing edge's cell in a tile has no point");
         };
-        for (int a = 0; a < 3; ++a) {
+        // The edge from voxel q along axis a, whose first voxel is inside
+        // or not: the four cells around it, counter-clockwise about +a.
+        auto edge = [&](int a, int qx, int qy, int qz, bool in0) {
+          static constexpr int kAround[4][2] = {{-1, -1}, {0, -1}, {0, 0}, {-1, 0}};
           const int b = (a + 1) % 3, cax = (a + 2) % 3;
-          int lo[3] = {0, 0, 0};
-          {
-            int s[3] = {1, 1, 1};
-            s[a] = 0;
-            if (info.nb[static_cast<std::size_t>(slot_index(s[0], s[1], s[2]))] < 0) lo[a] = -1;
+          std::uint32_t ids[4];
+          for (int k = 0; k < 4; ++k) {
+            int g[3] = {qx, qy, qz};
+            g[b] += kAround[k][0];
+            g[cax] += kAround[k][1];
+            ids[k] = point_of(g[0], g[1], g[2]);
           }
-          int step[3] = {0, 0, 0};
-          step[a] = 1;
-          const int stride = block_index(step[0], step[1], step[2]) - block_index(0, 0, 0);
-          int q[3];
-          for (q[0] = lo[0]; q[0] < 8; ++q[0])
-            for (q[1] = lo[1]; q[1] < 8; ++q[1])
-              for (q[2] = lo[2]; q[2] < 8; ++q[2]) {
-                const int i0 = block_index(q[0], q[1], q[2]);
-                const bool in0 = v[static_cast<std::size_t>(i0)] < 0, in1 = v[static_cast<std::size_t>(i0 + stride)] < 0;
-                if (in0 == in1) continue;
-                // The four cells around the edge, counter-clockwise about +a.
-                static constexpr int kAround[4][2] = {{-1, -1}, {0, -1}, {0, 0}, {-1, 0}};
-                std::uint32_t ids[4];
-                for (int k = 0; k < 4; ++k) {
-                  int g[3] = {q[0], q[1], q[2]};
-                  g[b] += kAround[k][0];
-                  g[cax] += kAround[k][1];
-                  ids[k] = point_of(g[0], g[1], g[2]);
-                }
-                // Inside at the first voxel: the surface faces +a.
-                if (!in0) std::swap(ids[1], ids[3]);
-                std::uint32_t poly[4];
-                int n = 0;
-                for (std::uint32_t id : ids)
-                  if (n == 0 || poly[n - 1] != id) poly[n++] = id;
-                if (n > 1 && poly[n - 1] == poly[0]) --n;
-                if (n == 3) {
-                  chunk.triangles.push_back({poly[0], poly[1], poly[2]});
-                } else if (n == 4 && poly[0] != poly[2] && poly[1] != poly[3]) {
-                  chunk.triangles.push_back({poly[0], poly[1], poly[2]});
-                  chunk.triangles.push_back({poly[0], poly[2], poly[3]});
-                }
-              }
-        }
+          // Inside at the first voxel: the surface faces +a.
+          if (!in0) std::swap(ids[1], ids[3]);
+          std::uint32_t poly[4];
+          int n = 0;
+          for (std::uint32_t id : ids)
+            if (n == 0 || poly[n - 1] != id) poly[n++] = id;
+          if (n > 1 && poly[n - 1] == poly[0]) --n;
+          if (n == 3) {
+            chunk.triangles.push_back({poly[0], poly[1], poly[2]});
+          } else if (n == 4 && poly[0] != poly[2] && poly[1] != poly[3]) {
+            chunk.triangles.push_back({poly[0], poly[1], poly[2]});
+            chunk.triangles.push_back({poly[0], poly[2], poly[3]});
+          }
+        };
+        // An edge whose first voxel lies in a tile below is this leaf's.
+        auto lo = [&](int a) {
+          int sl[3] = {1, 1, 1};
+          sl[a] = 0;
+          return info.nb[static_cast<std::size_t>(slot_index(sl[0], sl[1], sl[2]))] < 0 ? -1 : 0;
+        };
+        auto row = [&](int x, int y) -> unsigned { return blk.in[static_cast<std::size_t>(x + 1)][static_cast<std::size_t>(y + 1)]; };
+        // Sign changes along x and y between rows, along z within a row
+        // (bit z + 1 of a row: voxel z).
+        for (int x = lo(0); x < 8; ++x)
+          for (int y = 0; y < 8; ++y) {
+            unsigned d = (row(x, y) ^ row(x + 1, y)) & 0x1feu;
+            while (d) {
+              const int bit = std::countr_zero(d);
+              d &= d - 1;
+              edge(0, x, y, bit - 1, (row(x, y) >> bit) & 1);
+            }
+          }
+        for (int x = 0; x < 8; ++x)
+          for (int y = lo(1); y < 8; ++y) {
+            unsigned d = (row(x, y) ^ row(x, y + 1)) & 0x1feu;
+            while (d) {
+              const int bit = std::countr_zero(d);
+              d &= d - 1;
+              edge(1, x, y, bit - 1, (row(x, y) >> bit) & 1);
+            }
+          }
+        const unsigned zmask = lo(2) < 0 ? 0x1ffu : 0x1feu;  // edges from z = -1 or 0 to 7
+        for (int x = 0; x < 8; ++x)
+          for (int y = 0; y < 8; ++y) {
+            const unsigned r = row(x, y);
+            unsigned d = (r ^ (r >> 1)) & zmask;
+            while (d) {
+              const int bit = std::countr_zero(d);
+              d &= d - 1;
+              edge(2, x, y, bit - 1, (r >> bit) & 1);
+            }
+          }
       }
     }
   });
