@@ -14,13 +14,13 @@
 #include <openvdb/tools/LevelSetSphere.h>
 #include <tbb/global_control.h>
 
-#include "level_set_mesher.h"
+#include "cutsim/stock/level_set_mesher.h"
 
 namespace cutsim::test {
 namespace {
 
-using stock::detail::LevelSetMesh;
-using stock::detail::mesh_level_set;
+using stock::LevelSetMesh;
+using stock::mesh_level_set;
 
 // Every directed edge is matched by as many of its reverse: the
 // triangles close up, consistently wound.
@@ -191,7 +191,9 @@ TEST(LevelSetMesher, NoiseStaysClosedAndTheSameOnAnyThreads) {
     EXPECT_TRUE(closed(all)) << "adaptivity " << adaptivity;
     EXPECT_EQ(one.points, all.points);
     EXPECT_EQ(one.triangles, all.triangles);
-    if (adaptivity > 0) EXPECT_GT(all.merged_cells, 0u);
+    if (adaptivity > 0) {
+      EXPECT_GT(all.merged_cells, 0u);
+    }
   }
 }
 

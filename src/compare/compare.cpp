@@ -10,9 +10,10 @@
 #include <optional>
 
 #include <openvdb/openvdb.h>
-#include <openvdb/tools/VolumeToMesh.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+
+#include "cutsim/stock/level_set_mesher.h"
 
 namespace cutsim::compare {
 
@@ -93,20 +94,12 @@ TriMesh mesh_region(const std::vector<RegionBlock>& blocks, const Vec3& lattice_
           acc.setValue(openvdb::Coord(x, y, z),
                        static_cast<float>(b.v[static_cast<std::size_t>(((x - c0.x()) * s + (y - c0.y())) * s + (z - c0.z()))] * (h / 127)));
   }
-  std::vector<openvdb::Vec3s> pts;
-  std::vector<openvdb::Vec3I> tris;
-  std::vector<openvdb::Vec4I> quads;
   // Meshed at +h/4 so that a region thinner than a voxel still shows.
-  openvdb::tools::volumeToMesh(*grid, pts, tris, quads, 0.25 * h, 0.0);
+  stock::LevelSetMesh m = stock::mesh_level_set(grid->tree(), 0.0, static_cast<float>(0.25 * h));
   const Vec3 origin = lattice_origin + Vec3::Constant(0.5 * (k - 1) * h);  // centre of cell (0, 0, 0)
-  out.positions.reserve(pts.size());
-  for (const auto& p : pts) out.positions.push_back(origin + Vec3(p.x(), p.y(), p.z()));
-  out.triangles.reserve(tris.size() + 2 * quads.size());
-  for (const auto& t : tris) out.triangles.push_back({t[0], t[2], t[1]});
-  for (const auto& q : quads) {
-    out.triangles.push_back({q[0], q[2], q[1]});
-    out.triangles.push_back({q[0], q[3], q[2]});
-  }
+  out.positions.reserve(m.points.size());
+  for (const Vec3& p : m.points) out.positions.push_back(origin + hk * p);
+  out.triangles = std::move(m.triangles);
   return out;
 }
 

@@ -8,7 +8,7 @@
 //  2. per leaf, after the points are numbered, a polygon for every
 //     sign-changing edge the leaf owns (the edge's first voxel is in it, or
 //     that voxel is in a tile and the second is).
-#include "level_set_mesher.h"
+#include "cutsim/stock/level_set_mesher.h"
 
 #include <algorithm>
 #include <bit>
@@ -19,7 +19,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
-namespace cutsim::stock::detail {
+namespace cutsim::stock {
 
 namespace {
 
@@ -129,7 +129,8 @@ struct Block {
 };
 constexpr std::uint16_t kAllIn = (1u << kBlock) - 1;
 
-void gather(const LeafInfo& info, const std::vector<const LeafT*>& leaves, Block& b) {
+// (Less the isovalue: the surface is where the block's values cross 0.)
+void gather(const LeafInfo& info, const std::vector<const LeafT*>& leaves, float iso, Block& b) {
   const float* data[27];
   for (int s = 0; s < 27; ++s) data[s] = info.nb[static_cast<std::size_t>(s)] >= 0
                                              ? leaves[static_cast<std::size_t>(info.nb[static_cast<std::size_t>(s)])]->buffer().data()
@@ -141,10 +142,14 @@ void gather(const LeafInfo& info, const std::vector<const LeafT*>& leaves, Block
       const int sy = slot_of(y), ly = y & 7;
       float* row = b.v.data() + block_index(x, y, -1);
       const int s0 = slot_index(sx, sy, 0), s1 = s0 + 1, s2 = s0 + 2;
-      row[0] = data[s0] ? data[s0][cell_index(lx, ly, 7)] : tile(s0);
-      if (data[s1]) std::copy_n(data[s1] + cell_index(lx, ly, 0), 8, row + 1);
-      else std::fill_n(row + 1, 8, tile(s1));
-      row[9] = data[s2] ? data[s2][cell_index(lx, ly, 0)] : tile(s2);
+      row[0] = (data[s0] ? data[s0][cell_index(lx, ly, 7)] : tile(s0)) - iso;
+      if (data[s1]) {
+        const float* src = data[s1] + cell_index(lx, ly, 0);
+        for (int z = 0; z < 8; ++z) row[z + 1] = src[z] - iso;
+      } else {
+        std::fill_n(row + 1, 8, tile(s1) - iso);
+      }
+      row[9] = (data[s2] ? data[s2][cell_index(lx, ly, 0)] : tile(s2)) - iso;
       std::uint16_t bits = 0;
       for (int z = 0; z < kBlock; ++z) bits |= static_cast<std::uint16_t>((row[z] < 0 ? 1u : 0u) << z);
       b.in[static_cast<std::size_t>(x + 1)][static_cast<std::size_t>(y + 1)] = bits;
@@ -218,7 +223,7 @@ bool block_is_simple(const float* v, int x, int y, int z, int s) {
 
 }  // namespace
 
-LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity) {
+LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, float isovalue) {
   std::vector<const LeafT*> leaves;
   leaves.reserve(tree.leafCount());
   for (auto l = tree.cbeginLeaf(); l; ++l) leaves.push_back(l.getLeaf());
@@ -277,7 +282,7 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity) {
           info.nb[su] = cached_table ? cached_table[in_node(o)] : -1;
           if (info.nb[su] < 0) info.tile[su] = acc.getValue(o);
         }
-        gather(info, leaves, blk);
+        gather(info, leaves, isovalue, blk);
         bool any_in = false, any_out = false;
         for (const auto& col : blk.in)
           for (std::uint16_t r : col) {
@@ -484,7 +489,7 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity) {
       for (std::size_t li = c * kChunk; li < std::min(leaves.size(), (c + 1) * kChunk); ++li) {
         const LeafInfo& info = infos[li];
         if (!info.mixed) continue;
-        gather(info, leaves, blk);
+        gather(info, leaves, isovalue, blk);
         const Coord origin = leaves[li]->origin();
         // The point of the cell whose first corner is g (-1..7, leaf-local).
         auto point_of = [&](int gx, int gy, int gz) -> std::uint32_t {
@@ -591,4 +596,4 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity) {
   return out;
 }
 
-}  // namespace cutsim::stock::detail
+}  // namespace cutsim::stock

@@ -4,7 +4,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
-#include "level_set_mesher.h"
+#include "cutsim/stock/level_set_mesher.h"
 #include "stock_impl.h"
 
 namespace cutsim::stock {
@@ -60,7 +60,7 @@ void add_rect(TriMesh& mesh, int k, double c, bool positive, double u0, double u
 
 TriMesh Stock::surface_mesh(double adaptivity) const {
   const Impl& m = *impl_;
-  const detail::LevelSetMesh raw = detail::mesh_level_set(m.grid->tree(), adaptivity);
+  const LevelSetMesh raw = mesh_level_set(m.grid->tree(), adaptivity);
 
   TriMesh mesh;
   mesh.positions.resize(raw.points.size());

@@ -1,6 +1,6 @@
 #pragma once
-// Private: the stock's zero level set as triangles, read from the leaves'
-// buffers directly (dual contouring with one point per cell, and cells
+// A level set's surface as triangles (the stock's, the comparison's
+// regions), read from the leaves' buffers directly (dual contouring with one point per cell, and cells
 // merged within a leaf where the surface is flat and simple).
 #include <array>
 #include <cstdint>
@@ -10,16 +10,16 @@
 
 #include "cutsim/core/geometry.h"
 
-namespace cutsim::stock::detail {
+namespace cutsim::stock {
 
 struct LevelSetMesh {
   std::vector<Vec3> points;  ///< index space (voxel units)
-  /// Counter-clockwise seen from outside (the side where values are >= 0).
+  /// Counter-clockwise seen from outside (the side where values are >= the isovalue).
   std::vector<std::array<std::uint32_t, 3>> triangles;
   std::size_t merged_cells = 0;  ///< cells whose point is shared with others
 };
 
-/// The zero level set of `tree` (inside where a value is below 0).
+/// The level set of `tree` at `isovalue` (inside where a value is below it).
 ///
 /// A cell is the cube between eight neighbouring voxels; one whose corners
 /// differ in sign gets one point, the mean of its edges' zero crossings
@@ -38,6 +38,6 @@ struct LevelSetMesh {
 /// Sign changes are found wherever a leaf is at one end of an edge; an
 /// edge between two tiles is not meshed. The output is the same for any
 /// number of threads.
-LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity);
+LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, float isovalue = 0.0f);
 
-}  // namespace cutsim::stock::detail
+}  // namespace cutsim::stock
