@@ -60,6 +60,15 @@ TEST(LevelSetMesher, SphereIsClosedOutwardAndOnTheSurface) {
   double worst = 0;
   for (const Vec3& p : m.points) worst = std::max(worst, std::fabs((p - c).norm() - r));
   EXPECT_LT(worst, 0.05);
+  // Normals outward along the radius: the gradient at the cell's centre,
+  // at most half a voxel's diagonal from the point (1/46 rad here).
+  ASSERT_EQ(m.normals.size(), m.points.size());
+  double least_dot = 1;
+  for (std::size_t i = 0; i < m.points.size(); ++i) {
+    EXPECT_NEAR(m.normals[i].norm(), 1.0f, 1e-5f);
+    least_dot = std::min(least_dot, m.normals[i].cast<double>().dot((m.points[i] - c).normalized()));
+  }
+  EXPECT_GT(least_dot, 0.999);
   // Outward (positive) volume, the sphere's less the chords' caps.
   const double exact = 4.0 / 3.0 * std::numbers::pi * r * r * r;
   EXPECT_LT(volume(m), exact);
@@ -87,6 +96,9 @@ TEST(LevelSetMesher, MergedSphereStaysClosedAndNearTheSurface) {
     worst = std::max(worst, std::fabs((g - c).norm() - r));
   }
   EXPECT_LT(worst, 0.4);
+  // A merged point's normal is its cells' mean: within their spread.
+  for (std::size_t i = 0; i < m.points.size(); ++i)
+    EXPECT_GT(m.normals[i].cast<double>().dot((m.points[i] - c).normalized()), 0.995) << i;
   const double exact = 4.0 / 3.0 * std::numbers::pi * r * r * r;
   EXPECT_NEAR(volume(m), exact, 0.012 * exact);
 }

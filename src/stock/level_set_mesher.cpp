@@ -113,9 +113,21 @@ struct BoundaryCell {
   std::uint16_t point;
 };
 
+// Which of a leaf's 512 cells have a point, and their local point numbers
+// (in cell order from `first` in the chunk's reps): a leaf holds about a
+// hundred, and a table of all 512 was 100 MB of fresh memory on the
+// snowflake.
+struct CellPoints {
+  std::array<std::uint64_t, 8> has{};
+  std::array<std::uint16_t, 8> before{};  // cells with a point in the words before
+  std::uint32_t first = 0;
+};
+
 struct Chunk {
   std::vector<Vec3> points;  // index space
-  std::vector<std::uint16_t> reps;
+  std::vector<Eigen::Vector3f> normals;
+  std::vector<CellPoints> cells;
+  std::vector<std::uint16_t> reps;  // CellPoints' local point numbers
   std::vector<BoundaryCell> boundary;
   std::vector<std::array<std::uint32_t, 3>> triangles;
   std::size_t merged = 0;
@@ -260,6 +272,7 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, f
     std::array<std::array<float, 3>, 512> normal{};
     std::array<std::uint16_t, 512> rep{};
     std::vector<std::array<double, 3>> sums;
+    std::vector<std::array<float, 3>> nsums;
     std::vector<std::uint32_t> counts;
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
       Chunk& chunk = chunks[c];
@@ -319,13 +332,18 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, f
             }
           }
         sums.clear();
+        nsums.clear();
         counts.clear();
-        auto add_to = [&](std::uint16_t id, const std::array<double, 3>& p) {
+        auto add_to = [&](std::uint16_t id, const std::array<double, 3>& p, const std::array<float, 3>& n) {
           if (id == sums.size()) {
             sums.push_back({0, 0, 0});
+            nsums.push_back({0, 0, 0});
             counts.push_back(0);
           }
-          for (int a = 0; a < 3; ++a) sums[id][static_cast<std::size_t>(a)] += p[static_cast<std::size_t>(a)];
+          for (int a = 0; a < 3; ++a) {
+            sums[id][static_cast<std::size_t>(a)] += p[static_cast<std::size_t>(a)];
+            nsums[id][static_cast<std::size_t>(a)] += n[static_cast<std::size_t>(a)];
+          }
           ++counts[id];
         };
         if (any_cell) {
@@ -418,7 +436,7 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, f
               id = static_cast<std::uint16_t>(sums.size());
             }
             rep[ci] = id;
-            add_to(id, point[ci]);
+            add_to(id, point[ci], normal[ci]);
           }
           info.reps = static_cast<std::uint32_t>(chunk.reps.size());
           chunk.reps.insert(chunk.reps.end(), rep.begin(), rep.end());
@@ -445,8 +463,10 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, f
               if (owner != kSelf) continue;
               double p[3];
               cell_point(cv, k, p);
+              std::array<float, 3> n;
+              cell_normal(cv, n.data());
               const auto id = static_cast<std::uint16_t>(sums.size());
-              add_to(id, {x + p[0], y + p[1], z + p[2]});
+              add_to(id, {x + p[0], y + p[1], z + p[2]}, n);
               chunk.boundary.push_back({origin.offsetBy(x, y, z), id});
             }
         info.boundary_end = static_cast<std::uint32_t>(chunk.boundary.size());
@@ -456,6 +476,9 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, f
           const double w = 1.0 / counts[id];
           chunk.points.push_back(Vec3(origin.x() + sums[id][0] * w, origin.y() + sums[id][1] * w,
                                       origin.z() + sums[id][2] * w));
+          const Eigen::Vector3f n(nsums[id][0], nsums[id][1], nsums[id][2]);
+          const float len = n.norm();
+          chunk.normals.push_back(len > 0 ? Eigen::Vector3f(n / len) : Eigen::Vector3f(0, 0, 1));
         }
       }
     }
@@ -473,10 +496,13 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, f
     if (total >= UINT32_MAX) throw std::length_error("surface mesh: more than 2^32 points");
     for (std::size_t li = 0; li < leaves.size(); ++li) infos[li].first_point += static_cast<std::uint32_t>(base[li / kChunk]);
     out.points.resize(total);
+    out.normals.resize(total);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_chunks, 1), [&](const auto& range) {
       for (std::size_t c = range.begin(); c != range.end(); ++c) {
         std::copy(chunks[c].points.begin(), chunks[c].points.end(), out.points.begin() + static_cast<std::ptrdiff_t>(base[c]));
+        std::copy(chunks[c].normals.begin(), chunks[c].normals.end(), out.normals.begin() + static_cast<std::ptrdiff_t>(base[c]));
         std::vector<Vec3>().swap(chunks[c].points);
+        std::vector<Eigen::Vector3f>().swap(chunks[c].normals);
       }
     });
   }

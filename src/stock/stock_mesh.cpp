@@ -107,6 +107,7 @@ TriMesh Stock::surface_mesh(double adaptivity) const {
   };
   for (const auto& t : raw.triangles) clip(t);
   // Drop vertices no triangle uses (the clipped-away ones), keeping order.
+  std::vector<std::uint32_t> source;  // each kept vertex's index before
   {
     std::vector<std::uint32_t> remap(mesh.positions.size(), UINT32_MAX);
     std::vector<Vec3> kept;
@@ -115,19 +116,25 @@ TriMesh Stock::surface_mesh(double adaptivity) const {
         if (remap[i] == UINT32_MAX) {
           remap[i] = static_cast<std::uint32_t>(kept.size());
           kept.push_back(mesh.positions[i]);
+          source.push_back(i);
         }
         i = remap[i];
       }
     mesh.positions.swap(kept);
   }
-  // Normals from the level set's gradient (central differences of
-  // trilinear samples half a voxel either side along each axis). The six
-  // samples read only the 3^3 voxels from floor(q - 1/2): those are read
-  // once (27 reads, not 48) and each sample interpolates OpenVDB's way.
+  // Normals: the mesher's at its points. At the points the ROI's clipping
+  // made, the level set's gradient (central differences of trilinear
+  // samples half a voxel either side along each axis). The six samples
+  // read only the 3^3 voxels from floor(q - 1/2): those are read once (27
+  // reads, not 48) and each sample interpolates OpenVDB's way.
   mesh.normals.resize(mesh.positions.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.positions.size(), 4096), [&](const auto& range) {
     auto acc = m.grid->getConstAccessor();
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      if (source[i] < raw.normals.size()) {
+        mesh.normals[i] = raw.normals[source[i]];
+        continue;
+      }
       const Vec3 q = (mesh.positions[i] - m.origin) / m.h;
       const openvdb::Coord base(static_cast<int>(std::floor(q.x() - 0.5)), static_cast<int>(std::floor(q.y() - 0.5)),
                                 static_cast<int>(std::floor(q.z() - 0.5)));

@@ -14,6 +14,9 @@ namespace cutsim::stock {
 
 struct LevelSetMesh {
   std::vector<Vec3> points;  ///< index space (voxel units)
+  /// Unit, one per point, outwards: the gradient at its cells' centres
+  /// (their corners' differences), the mean of its cells' where merged.
+  std::vector<Eigen::Vector3f> normals;
   /// Counter-clockwise seen from outside (the side where values are >= the isovalue).
   std::vector<std::array<std::uint32_t, 3>> triangles;
   std::size_t merged_cells = 0;  ///< cells whose point is shared with others
