@@ -96,6 +96,14 @@ TEST(LevelSetMesher, MergedSphereStaysClosedAndNearTheSurface) {
     worst = std::max(worst, std::fabs((g - c).norm() - r));
   }
   EXPECT_LT(worst, 0.4);
+  // Every triangle faces out: quads of merged points, far from flat, are
+  // split along the diagonal that does not fold.
+  std::size_t inward = 0;
+  for (const auto& t : m.triangles) {
+    const Vec3 f = (m.points[t[1]] - m.points[t[0]]).cross(m.points[t[2]] - m.points[t[0]]);
+    if (f.dot(m.points[t[0]] - c) <= 0) ++inward;
+  }
+  EXPECT_EQ(inward, 0u);
   // A merged point's normal is its cells' mean: within their spread.
   for (std::size_t i = 0; i < m.points.size(); ++i)
     EXPECT_GT(m.normals[i].cast<double>().dot((m.points[i] - c).normalized()), 0.995) << i;

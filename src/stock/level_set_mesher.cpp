@@ -563,8 +563,30 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, f
           if (n == 3) {
             chunk.triangles.push_back({poly[0], poly[1], poly[2]});
           } else if (n == 4 && poly[0] != poly[2] && poly[1] != poly[3]) {
-            chunk.triangles.push_back({poly[0], poly[1], poly[2]});
-            chunk.triangles.push_back({poly[0], poly[2], poly[3]});
+            // Split along the diagonal whose two triangles face most nearly
+            // the way the points' normals do (a quad of merged points is
+            // far from flat, and the other split may fold).
+            const Vec3* p[4];
+            Eigen::Vector3f sum = Eigen::Vector3f::Zero();
+            for (int k = 0; k < 4; ++k) {
+              p[k] = &out.points[poly[k]];
+              sum += out.normals[poly[k]];
+            }
+            const Vec3 ref = sum.cast<double>();
+            auto facing = [&](int a, int b, int c) {
+              const Vec3 f = (*p[b] - *p[a]).cross(*p[c] - *p[a]);
+              const double len = f.norm();
+              return len > 0 ? f.dot(ref) / len : 0.0;
+            };
+            const double along02 = std::min(facing(0, 1, 2), facing(0, 2, 3));
+            const double along13 = std::min(facing(0, 1, 3), facing(1, 2, 3));
+            if (along13 > along02) {
+              chunk.triangles.push_back({poly[0], poly[1], poly[3]});
+              chunk.triangles.push_back({poly[1], poly[2], poly[3]});
+            } else {
+              chunk.triangles.push_back({poly[0], poly[1], poly[2]});
+              chunk.triangles.push_back({poly[0], poly[2], poly[3]});
+            }
           }
         };
         // An edge whose first voxel lies in a tile below is this leaf's.
