@@ -422,6 +422,16 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
     rb.v.assign(static_cast<std::size_t>(s * s * s), 127);
     return rb;
   };
+  // The overcut's and undercut's blocks for `b`, only those it has (an
+  // empty one for the other), on the same cells: one reading of `shift`,
+  // which another thread may raise meanwhile (keep() coarsens them to it).
+  auto region_blocks = [&](const stock::VoxelBlock& b, bool over, bool under) {
+    std::pair<RegionBlock, RegionBlock> both;
+    RegionBlock rb = region_block(b);
+    if (over && under) both.first = rb;
+    (over && !under ? both.first : both.second) = std::move(rb);
+    return both;
+  };
   // A uniform block (a tile: all material or all air) where the target is
   // uniform too (+-h at every voxel): every voxel adds the same to the
   // volumes and the same value to its cell, so the sums are products and
@@ -439,19 +449,20 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
     const double nvox = static_cast<double>(b.n[0] * b.n[1] * b.n[2]);
     const double over = x * nvox, under = y * nvox;
     if (over == 0 && under == 0) return true;
-    RegionBlock ro = region_block(b), ru = region_block(b);
+    auto [ro, ru] = region_blocks(b, over > 0, under > 0);
     const double cs = std::clamp<double>(sv, -h, h);
     if (!agree_beyond_h(cs, tv, h)) {
       const std::int8_t qo = quantize(std::max<double>(tv, -cs), h), qu = quantize(std::max<double>(cs, -tv), h);
-      const int s = ro.side();
+      const RegionBlock& geo = over > 0 ? ro : ru;
+      const int s = geo.side();
       int c1[3];
-      for (int k = 0; k < 3; ++k) c1[k] = ro.cell(ro.origin[k] + b.n[k] - 1, k);
+      for (int k = 0; k < 3; ++k) c1[k] = geo.cell(geo.origin[k] + b.n[k] - 1, k);
       for (int cx = 0; cx <= c1[0]; ++cx)
         for (int cy = 0; cy <= c1[1]; ++cy)
           for (int cz = 0; cz <= c1[2]; ++cz) {
             const auto c = static_cast<std::size_t>((cx * s + cy) * s + cz);
-            ro.v[c] = std::min(ro.v[c], qo);
-            ru.v[c] = std::min(ru.v[c], qu);
+            if (over > 0) ro.v[c] = std::min(ro.v[c], qo);
+            if (under > 0) ru.v[c] = std::min(ru.v[c], qu);
           }
     }
     keep(b, over, under, std::move(ro), std::move(ru));
@@ -483,8 +494,9 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
           under += std::max(0.0, fs - ft);
         }
     if (over == 0 && under == 0) return;  // most blocks: stock and target agree
-    RegionBlock ro = region_block(b), ru = region_block(b);
-    const int s = ro.side();
+    auto [ro, ru] = region_blocks(b, over > 0, under > 0);
+    const RegionBlock& geo = over > 0 ? ro : ru;
+    const int s = geo.side();
     for (int x = 0; x < b.n[0]; ++x)
       for (int y = 0; y < b.n[1]; ++y)
         for (int z = 0; z < b.n[2]; ++z) {
@@ -492,9 +504,9 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
           const double cs = std::clamp<double>(b.uniform ? b.value : b.values[i], -h, h);
           if (agree_beyond_h(cs, dt[i], h)) continue;  // (both regions' values 127, the fill)
           const auto c = static_cast<std::size_t>(
-              (ro.cell(ro.origin.x() + x, 0) * s + ro.cell(ro.origin.y() + y, 1)) * s + ro.cell(ro.origin.z() + z, 2));
-          ro.v[c] = std::min(ro.v[c], quantize(std::max<double>(dt[i], -cs), h));
-          ru.v[c] = std::min(ru.v[c], quantize(std::max<double>(cs, -dt[i]), h));
+              (geo.cell(geo.origin.x() + x, 0) * s + geo.cell(geo.origin.y() + y, 1)) * s + geo.cell(geo.origin.z() + z, 2));
+          if (over > 0) ro.v[c] = std::min(ro.v[c], quantize(std::max<double>(dt[i], -cs), h));
+          if (under > 0) ru.v[c] = std::min(ru.v[c], quantize(std::max<double>(cs, -dt[i]), h));
         }
     keep(b, over, under, std::move(ro), std::move(ru));
   }, true,
