@@ -428,8 +428,8 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
   auto region_blocks = [&](const stock::VoxelBlock& b, bool over, bool under) {
     std::pair<RegionBlock, RegionBlock> both;
     RegionBlock rb = region_block(b);
-    if (over && under) both.first = rb;
-    (over && !under ? both.first : both.second) = std::move(rb);
+    if (over && under) both.second = rb;
+    (over ? both.first : both.second) = std::move(rb);
     return both;
   };
   // A uniform block (a tile: all material or all air) where the target is

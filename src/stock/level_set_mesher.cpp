@@ -113,21 +113,10 @@ struct BoundaryCell {
   std::uint16_t point;
 };
 
-// Which of a leaf's 512 cells have a point, and their local point numbers
-// (in cell order from `first` in the chunk's reps): a leaf holds about a
-// hundred, and a table of all 512 was 100 MB of fresh memory on the
-// snowflake.
-struct CellPoints {
-  std::array<std::uint64_t, 8> has{};
-  std::array<std::uint16_t, 8> before{};  // cells with a point in the words before
-  std::uint32_t first = 0;
-};
-
 struct Chunk {
   std::vector<Vec3> points;  // index space
   std::vector<Eigen::Vector3f> normals;
-  std::vector<CellPoints> cells;
-  std::vector<std::uint16_t> reps;  // CellPoints' local point numbers
+  std::vector<std::uint16_t> reps;  // 512 local point numbers (or kNoCell) per leaf with cells
   std::vector<BoundaryCell> boundary;
   std::vector<std::array<std::uint32_t, 3>> triangles;
   std::size_t merged = 0;

@@ -1,7 +1,7 @@
 #pragma once
 // A level set's surface as triangles (the stock's, the comparison's
-// regions), read from the leaves' buffers directly (dual contouring with one point per cell, and cells
-// merged within a leaf where the surface is flat and simple).
+// regions), read from the leaves' buffers directly: one point per cell,
+// cells merged within a leaf where the surface is flat and simple.
 #include <array>
 #include <cstdint>
 #include <vector>
