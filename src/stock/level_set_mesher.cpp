@@ -104,6 +104,7 @@ struct LeafInfo {
   std::uint32_t reps = UINT32_MAX;    // offset of its 512 cells' local points in the chunk's reps
   std::uint32_t boundary_begin = 0, boundary_end = 0;  // in the chunk's boundary cells
   bool mixed = false;  // its 10^3 voxels hold both signs
+  std::uint32_t signs = 0;  // where mixed: its Block::in in the chunk's signs
 };
 
 // A cell whose first corner lies in a tile, kept by the first leaf (in
@@ -113,21 +114,24 @@ struct BoundaryCell {
   std::uint16_t point;
 };
 
+// in[x + 1][y + 1], bit z + 1: voxel (x, y, z) of a leaf (-1..8) is inside.
+using SignRows = std::array<std::array<std::uint16_t, kBlock>, kBlock>;
+
+// The leaf's voxels from -1 to 8 along each axis, and which are inside.
+struct Block {
+  std::array<float, kBlock * kBlock * kBlock> v;
+  SignRows in;
+};
 struct Chunk {
   std::vector<Vec3> points;  // index space
   std::vector<Eigen::Vector3f> normals;
   std::vector<std::uint16_t> reps;  // 512 local point numbers (or kNoCell) per leaf with cells
   std::vector<BoundaryCell> boundary;
+  std::vector<SignRows> signs;  // the mixed leaves' (pass 2 needs only these)
   std::vector<std::array<std::uint32_t, 3>> triangles;
   std::size_t merged = 0;
 };
 
-// The leaf's voxels from -1 to 8 along each axis, and which are inside.
-struct Block {
-  std::array<float, kBlock * kBlock * kBlock> v;
-  // in[x + 1][y + 1], bit z + 1: voxel (x, y, z) is inside (below 0).
-  std::array<std::array<std::uint16_t, kBlock>, kBlock> in;
-};
 constexpr std::uint16_t kAllIn = (1u << kBlock) - 1;
 
 // (Less the isovalue: the surface is where the block's values cross 0.)
@@ -294,6 +298,8 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, f
         info.mixed = any_in && any_out;
         info.boundary_begin = info.boundary_end = static_cast<std::uint32_t>(chunk.boundary.size());
         if (!info.mixed) continue;
+        info.signs = static_cast<std::uint32_t>(chunk.signs.size());
+        chunk.signs.push_back(blk.in);
 
         // The leaf's own cells: those whose eight corners are not all on
         // one side, found a row of eight at a time.
@@ -498,13 +504,12 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, f
 
   // Pass 2: a polygon per sign-changing edge.
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n_chunks, 1), [&](const auto& range) {
-    Block blk;
     for (std::size_t c = range.begin(); c != range.end(); ++c) {
       Chunk& chunk = chunks[c];
       for (std::size_t li = c * kChunk; li < std::min(leaves.size(), (c + 1) * kChunk); ++li) {
         const LeafInfo& info = infos[li];
         if (!info.mixed) continue;
-        gather(info, leaves, isovalue, blk);
+        const SignRows& in = chunk.signs[info.signs];
         const Coord origin = leaves[li]->origin();
         // The point of the cell whose first corner is g (-1..7, leaf-local).
         auto point_of = [&](int gx, int gy, int gz) -> std::uint32_t {
@@ -584,7 +589,7 @@ LevelSetMesh mesh_level_set(const openvdb::FloatTree& tree, double adaptivity, f
           sl[a] = 0;
           return info.nb[static_cast<std::size_t>(slot_index(sl[0], sl[1], sl[2]))] < 0 ? -1 : 0;
         };
-        auto row = [&](int x, int y) -> unsigned { return blk.in[static_cast<std::size_t>(x + 1)][static_cast<std::size_t>(y + 1)]; };
+        auto row = [&](int x, int y) -> unsigned { return in[static_cast<std::size_t>(x + 1)][static_cast<std::size_t>(y + 1)]; };
         // Sign changes along x and y between rows, along z within a row
         // (bit z + 1 of a row: voxel z).
         for (int x = lo(0); x < 8; ++x)
