@@ -2,7 +2,9 @@
 // Test helpers: programs written to temporary files, the pipeline run on them.
 #include <gtest/gtest.h>
 
+#include <cstdint>
 #include <filesystem>
+#include <map>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -15,6 +17,26 @@
 #include "cutsim/tool/tool.h"
 
 namespace cutsim::test {
+
+/// Every directed edge of `m`'s triangles (anything with `triangles` of
+/// three indices) is matched by as many of its reverse: they close up,
+/// consistently wound. (Edges four triangles share, where two sheets of a
+/// level set's mesh touch, count as closed.)
+template <class Mesh>
+::testing::AssertionResult edges_matched(const Mesh& m) {
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> count;
+  for (const auto& t : m.triangles) {
+    if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0]) return ::testing::AssertionFailure() << "a degenerate triangle";
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::uint32_t a = t[k], b = t[(k + 1) % 3];
+      if (a < b) ++count[{a, b}];
+      else --count[{b, a}];
+    }
+  }
+  for (const auto& [e, n] : count)
+    if (n != 0) return ::testing::AssertionFailure() << "edge " << e.first << "-" << e.second << " is unmatched " << n << " times";
+  return ::testing::AssertionSuccess();
+}
 
 /// A fresh directory under the system's temp folder, removed at scope end.
 class TempDir {

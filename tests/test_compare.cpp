@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <tuple>
 
 #include <nlohmann/json.hpp>
 #include <tiny_gltf.h>
@@ -297,6 +298,45 @@ TEST(Compare, CoarseRegionMeshesKeepTheVolumesAndCoverTheFineRegion) {
   for (std::size_t i = 0; i < coarse.overcut_mesh.positions.size(); i += 97)
     ASSERT_LT(nearest(coarse.overcut_mesh.positions[i], fine.overcut_mesh), cell) << "coarse vertex " << i;
   EXPECT_LT(coarse.overcut_mesh.positions.size(), fine.overcut_mesh.positions.size() / 4);
+}
+
+// The region meshes merged as the machined surface is (flat stretches of a
+// region's faces into larger polygons): the same volumes, still closed,
+// enclosing what the unmerged mesh does, each vertex on the unmerged
+// surface's cells, and far fewer of them. The slot's floor 5 um (a voxel)
+// too deep up to X3 and its walls make the overcut region.
+TEST(Compare, MergedRegionMeshesAreClosedOnTheUnmergedSurfaceAndSmaller) {
+  TempDir dir;
+  auto r = run_program(dir, "G0 X-2 Y0 Z1\nG1 Z-0.105 F100\nG1 X3\nG1 Z-0.1\nG1 X4.5\nG1 Z-0.095\nG1 X8\nG0 Z1\n",
+                       "flat:d=2", Aabb{Vec3(0, -2, -1), Vec3(6, 2, 0)}, kH);
+  const compare::Target target(slotted_block());
+  const TriMesh machined = r.stock->surface_mesh();
+  compare::CompareOptions plain_opt{0.001};
+  plain_opt.region_mesh_adaptivity = 0;
+  const compare::CompareResult plain = compare::compare(*r.stock, target, machined, plain_opt);
+  const compare::CompareResult merged = compare::compare(*r.stock, target, machined, {0.001});
+  EXPECT_EQ(merged.overcut_volume_mm3, plain.overcut_volume_mm3);
+  EXPECT_EQ(merged.undercut_volume_mm3, plain.undercut_volume_mm3);
+  EXPECT_NEAR(plain.overcut_volume_mm3, 0.005 * kFootprint, 0.05 * kH * 2 * kFootprint);
+  for (const auto& [name, a, b] : {std::tuple{"overcut", &plain.overcut_mesh, &merged.overcut_mesh},
+                                   std::tuple{"undercut", &plain.undercut_mesh, &merged.undercut_mesh}}) {
+    ASSERT_FALSE(a->triangles.empty()) << name;
+    EXPECT_TRUE(edges_matched(*a)) << name;
+    EXPECT_TRUE(edges_matched(*b)) << name;
+    // (Each region's mesh lies at +h/4 around its voxels: a slab of the
+    // footprint and some h thick.)
+    EXPECT_GT(a->signed_volume(), 0) << name;
+    EXPECT_NEAR(b->signed_volume(), a->signed_volume(), 0.01 * a->signed_volume()) << name;
+    EXPECT_LT(b->positions.size(), a->positions.size() / 2) << name;
+    // Every merged vertex (a sample) lies within a voxel of an unmerged one.
+    double worst = 0;
+    for (std::size_t i = 0; i < b->positions.size(); i += 41) {
+      double best = 1e300;
+      for (const Vec3& q : a->positions) best = std::min(best, (q - b->positions[i]).squaredNorm());
+      worst = std::max(worst, std::sqrt(best));
+    }
+    EXPECT_LT(worst, kH) << name;
+  }
 }
 
 // A target whose surface is nowhere near the region of interest (a block

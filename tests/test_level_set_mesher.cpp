@@ -6,15 +6,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <map>
 #include <numbers>
 #include <random>
-#include <utility>
 
 #include <openvdb/tools/LevelSetSphere.h>
 #include <tbb/global_control.h>
 
 #include "cutsim/stock/level_set_mesher.h"
+#include "helpers.h"
 
 namespace cutsim::test {
 namespace {
@@ -22,22 +21,7 @@ namespace {
 using stock::LevelSetMesh;
 using stock::mesh_level_set;
 
-// Every directed edge is matched by as many of its reverse: the
-// triangles close up, consistently wound.
-::testing::AssertionResult closed(const LevelSetMesh& m) {
-  std::map<std::pair<std::uint32_t, std::uint32_t>, int> count;
-  for (const auto& t : m.triangles) {
-    if (t[0] == t[1] || t[1] == t[2] || t[2] == t[0]) return ::testing::AssertionFailure() << "a degenerate triangle";
-    for (int k = 0; k < 3; ++k) {
-      const std::uint32_t a = t[static_cast<std::size_t>(k)], b = t[static_cast<std::size_t>((k + 1) % 3)];
-      if (a < b) ++count[{a, b}];
-      else --count[{b, a}];
-    }
-  }
-  for (const auto& [e, n] : count)
-    if (n != 0) return ::testing::AssertionFailure() << "edge " << e.first << "-" << e.second << " is unmatched " << n << " times";
-  return ::testing::AssertionSuccess();
-}
+::testing::AssertionResult closed(const LevelSetMesh& m) { return edges_matched(m); }
 
 double volume(const LevelSetMesh& m) {
   double v = 0;

@@ -41,7 +41,8 @@ Action add_compare_command(CLI::App& app) {
   cmd->add_option("--voxel", a->voxel, "voxel size for a mesh MACHINED, mm (default: its largest side / 1000)")
       ->check(kPositive);
   cmd->add_option("--glb-scale", a->glb_scale, "scale of the glb's root node (1: metres)")->check(kPositive);
-  cmd->add_option("--mesh-adaptivity", a->mesh_adaptivity, "surface mesh adaptivity for a .vdb, 0 to 1")
+  cmd->add_option("--mesh-adaptivity", a->mesh_adaptivity,
+                  "mesh adaptivity, 0 to 1: the surface of a .vdb and the overcut and undercut regions")
       ->check(CLI::Range(0.0, 1.0));
   cmd->add_option("--format", a->format, "console output: text or json")->check(CLI::IsMember({"text", "json"}));
 
@@ -79,7 +80,9 @@ Action add_compare_command(CLI::App& app) {
       throw GeometryError(SourceLocation{a->target, 0, 0, {}},
                           "the target does not overlap the machined stock: nothing to compare; check its placement");
     const compare::Target target(std::move(target_mesh));
-    const compare::CompareResult c = compare::compare(*stock, target, machined, compare::CompareOptions{tolerance});
+    compare::CompareOptions compare_options{tolerance};
+    compare_options.region_mesh_adaptivity = a->mesh_adaptivity;
+    const compare::CompareResult c = compare::compare(*stock, target, machined, compare_options);
 
     const std::string stem = fs::path(a->machined).stem().string() + ".compare";
     const std::string glb = (fs::path(a->outdir) / (stem + ".glb")).string();

@@ -114,7 +114,8 @@ Action add_run_command(CLI::App& app) {
                   "scale of the glb's root node (1: metres; 1000 shows a 1 mm part as 1 m)")
       ->check(kPositive);
   cmd->add_option("--mesh-adaptivity", args->mesh_adaptivity,
-                  "0: one quad per surface voxel; 0.01 (default) to 1: merge ever less flat regions into larger polygons")
+                  "0: one quad per surface voxel; 0.01 (default) to 1: merge ever less flat regions into larger polygons "
+                  "(the machined surface and the overcut and undercut regions)")
       ->check(CLI::Range(0.0, 1.0));
 
   return [args]() -> int {
@@ -184,7 +185,9 @@ Action add_run_command(CLI::App& app) {
     std::vector<io::GltfPart> parts;
     if (target_mesh) {
       const compare::Target target(std::move(*target_mesh));
-      res.comparison = compare::compare(*res.stock, target, mesh, compare::CompareOptions{tolerance});
+      compare::CompareOptions compare_options{tolerance};
+      compare_options.region_mesh_adaptivity = args->mesh_adaptivity;
+      res.comparison = compare::compare(*res.stock, target, mesh, compare_options);
       parts = comparison_parts(*res.comparison, part, gopt, colors);
     } else {
       parts.push_back(part);

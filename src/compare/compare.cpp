@@ -74,7 +74,8 @@ std::int8_t quantize(double v, double h) {
 }
 
 // Meshes the region on its blocks' cells (all of one size, 2^shift voxels).
-TriMesh mesh_region(const std::vector<RegionBlock>& blocks, const Vec3& lattice_origin, double h, int shift) {
+TriMesh mesh_region(const std::vector<RegionBlock>& blocks, const Vec3& lattice_origin, double h, int shift,
+                    double adaptivity) {
   TriMesh out;
   if (blocks.empty()) return out;
   openvdb::initialize();
@@ -95,7 +96,7 @@ TriMesh mesh_region(const std::vector<RegionBlock>& blocks, const Vec3& lattice_
                        static_cast<float>(b.v[static_cast<std::size_t>(((x - c0.x()) * s + (y - c0.y())) * s + (z - c0.z()))] * (h / 127)));
   }
   // Meshed at +h/4 so that a region thinner than a voxel still shows.
-  stock::LevelSetMesh m = stock::mesh_level_set(grid->tree(), 0.0, static_cast<float>(0.25 * h));
+  stock::LevelSetMesh m = stock::mesh_level_set(grid->tree(), adaptivity, static_cast<float>(0.25 * h));
   const Vec3 origin = lattice_origin + Vec3::Constant(0.5 * (k - 1) * h);  // centre of cell (0, 0, 0)
   out.positions.reserve(m.points.size());
   for (const Vec3& p : m.points) out.positions.push_back(origin + hk * p);
@@ -526,8 +527,8 @@ CompareResult compare(const stock::Stock& stock, const Target& target, const Tri
   std::sort(over_blocks.begin(), over_blocks.end(), by_origin);
   std::sort(under_blocks.begin(), under_blocks.end(), by_origin);
   r.region_mesh_voxel_mm = (1 << shift.load()) * h;
-  r.overcut_mesh = mesh_region(over_blocks, lattice, h, shift.load());
-  r.undercut_mesh = mesh_region(under_blocks, lattice, h, shift.load());
+  r.overcut_mesh = mesh_region(over_blocks, lattice, h, shift.load(), opt.region_mesh_adaptivity);
+  r.undercut_mesh = mesh_region(under_blocks, lattice, h, shift.load(), opt.region_mesh_adaptivity);
   const double hv = h * h * h;
   for (const Sum& s : sums) {
     r.overcut_volume_mm3 += s.over * hv;

@@ -16,6 +16,10 @@ struct CompareOptions {
   /// within about this many blocks of its own (16384: some 2M vertices); a
   /// coarse cell is in a region if any of its voxels is (nothing vanishes).
   std::size_t region_block_budget = 16384;
+  /// The region meshes' merging, as the machined surface's (Stock::surface_mesh):
+  /// 0 keeps a quad per cell face; more merges flat stretches of a region's
+  /// surface into larger polygons (a thin region's two faces stay apart).
+  double region_mesh_adaptivity = 0.01;
 };
 
 struct CompareResult {
