@@ -348,6 +348,19 @@ TEST(Cli, BenchRunsTheCasesOfAFolder) {
   EXPECT_DOUBLE_EQ(j[0]["voxel_updates_per_s"].get<double>(), band / j[0]["stock_update_s"].get<double>());
   EXPECT_DOUBLE_EQ(j[0]["update_to_kernel"].get<double>(),
                    j[0]["voxel_updates_per_s"].get<double>() / j[0]["kernel_updates_per_s"].get<double>());
+  // Where the time went: each phase's median, the update's the column's,
+  // none more than the slowest run's total (with 2 runs, the medians are
+  // the slower of each), and a line per case after the table.
+  const auto& ph = j[0]["phases_s"];
+  for (const char* k : {"parse", "stock_build", "stock_update", "contact_check", "mesh", "compare", "write", "total"}) {
+    ASSERT_TRUE(ph.contains(k)) << k;
+    EXPECT_GE(ph[k].get<double>(), 0) << k;
+    EXPECT_LE(ph[k].get<double>(), ph["total"].get<double>()) << k;
+  }
+  EXPECT_EQ(ph["stock_update"], j[0]["stock_update_s"]);
+  EXPECT_EQ(ph["total"], j[0]["wall_s"]);
+  EXPECT_GT(ph["stock_update"].get<double>(), 0);
+  EXPECT_NE(out.find("phases (s, medians of the repeats):\n  slot "), std::string::npos) << out;
   // An unknown case is a missing input.
   EXPECT_EQ(run_cli("bench nope --dir " + dir.path().string(), &out, &err), 66);
 }

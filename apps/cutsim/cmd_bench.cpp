@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iostream>
 #include <limits>
+#include <map>
 #include <memory>
 #include <optional>
 #include <sys/wait.h>
@@ -29,6 +30,10 @@ namespace cutsim::app {
 namespace fs = std::filesystem;
 
 namespace {
+
+// The run report's phases (timing_s) the bench reports, in the run's order.
+constexpr const char* kPhases[] = {"parse", "stock_build", "stock_update", "contact_check", "mesh", "compare", "write",
+                                   "total"};
 
 struct BenchArgs {
   std::vector<std::string> cases;
@@ -184,6 +189,7 @@ Action add_bench_command(CLI::App& app) {
 
     nlohmann::ordered_json rows = nlohmann::ordered_json::array();
     std::vector<std::pair<std::string, std::string>> goal_lines;  // (case, its goals' line)
+    std::vector<std::pair<std::string, std::string>> phase_lines;  // (case, its phases' line)
     // (The runs inherit this process's GLIBC_TUNABLES, and with it malloc's pages.)
     const bool huge = malloc_huge_pages();
     std::printf("kernel: %.3g voxel updates/s on %d thread%s (ball-end distance, max, write back, in cache; "
@@ -197,6 +203,7 @@ Action add_bench_command(CLI::App& app) {
     for (const auto& c : cases) {
       const std::string nc = (fs::path(a->dir) / (c + ".nc")).string();
       std::vector<double> walls, sims, upds, kernels;
+      std::map<std::string, std::vector<double>> phases;  // the report's timing_s, by phase
       double rss = 0;
       bool same = true;  // every repeat gave the results of the first
       nlohmann::json rep, first;
@@ -226,6 +233,8 @@ Action add_bench_command(CLI::App& app) {
         walls.push_back(rep["timing_s"]["total"].get<double>());
         sims.push_back(rep["timing_s"]["simulate"].get<double>());
         upds.push_back(rep["timing_s"]["stock_update"].get<double>());
+        for (const char* k : kPhases)
+          if (rep["timing_s"].contains(k)) phases[k].push_back(rep["timing_s"][k].get<double>());
         rss = std::max(rss, rep["peak_rss_mb"].get<double>());
         if (r == 0) first = rep;
         else
@@ -261,6 +270,22 @@ Action add_bench_command(CLI::App& app) {
       row["peak_rss_mb"] = rss;
       row["moves_per_s"] = sim_s > 0 ? moves / sim_s : 0;
       row["stock_update_s"] = upd_s;
+      {
+        // Where the time goes, each phase's median over the repeats (so
+        // they need not add up to the wall time's median).
+        nlohmann::ordered_json ph = nlohmann::ordered_json::object();
+        std::string line;
+        for (const char* k : kPhases) {
+          if (!phases.count(k)) continue;
+          const double v = median(phases[k]);
+          ph[k] = v;
+          char buf[64];
+          std::snprintf(buf, sizeof buf, "%s%s %.2f", line.empty() ? "" : ", ", k, v);
+          line += buf;
+        }
+        row["phases_s"] = ph;
+        phase_lines.emplace_back(c, line);
+      }
       row["voxel_evaluations"] = evals;
       row["evaluations_per_s"] = eps;
       row["band_voxels"] = band;
@@ -334,6 +359,8 @@ Action add_bench_command(CLI::App& app) {
     // The goals the cases' jobs set, one line a case.
     if (!goal_lines.empty()) std::printf("goals ([bench] in each case's job):\n");
     for (const auto& [name, line] : goal_lines) std::printf("  %-18s %s\n", name.c_str(), line.c_str());
+    std::printf("phases (s, medians of the repeats):\n");
+    for (const auto& [name, line] : phase_lines) std::printf("  %-18s %s\n", name.c_str(), line.c_str());
     if (json_file) {
       const std::string text = rows.dump(2) + "\n";
       json_file->write(text.data(), text.size());
