@@ -295,6 +295,36 @@ TEST(Cli, ContactsPrintByLineAndExitOne) {
     EXPECT_EQ(found, 2);
   }
 
+  // Many contacts: a line per kind, then the 20 that matter most, so the
+  // rapid pulling out at the end (line 29) shows behind 26 shank contacts
+  // (lines 3-28), on the console and among the glb's markers.
+  {
+    std::string many = "T3 M6\nG0 X0 Y0 Z1\nG1 Z-1.5 F100\n";
+    for (int k = 1; k <= 25; ++k) many += "G1 X" + std::to_string(0.04 * k) + "\n";
+    many += "G0 Z1\nM30\n";
+    const std::string mp = dir.write("many.nc", many);
+    EXPECT_EQ(run_cli("run " + mp + " --tools " + tbl + " --stock-box -3,-3,-3,3,3,0 --voxel 0.02 -o " + outdir, &out, &err),
+              1)
+        << out << err;
+    EXPECT_NE(out.find("28 contacts:\n  rapid (cutter): 1 on line 29, deepest at least 40 um at line 29"),
+              std::string::npos)
+        << out;
+    EXPECT_NE(out.find("\n  shank: 26 on lines 3-28, deepest at least 40 um at line 3; 26 of them at least 40 um"),
+              std::string::npos)
+        << out;
+    EXPECT_NE(out.find(mp + ":29: rapid contact (shank)"), std::string::npos) << out;
+    EXPECT_NE(out.find(mp + ":20: shank contact"), std::string::npos) << out;  // 18 shank contacts: lines 3-20
+    EXPECT_EQ(out.find(mp + ":21: shank contact"), std::string::npos) << out;
+    EXPECT_NE(out.find("... and 8 more contacts"), std::string::npos) << out;
+    const auto rep = nlohmann::json::parse(slurp(outdir + "/many.report.json"));
+    EXPECT_EQ(rep["contacts"].size(), 28u);
+    ASSERT_EQ(rep["contact_summary"].size(), 3u);
+    EXPECT_EQ(rep["contact_summary"][2]["region"], "shank");
+    EXPECT_EQ(rep["contact_summary"][2]["records"], 26);
+    EXPECT_EQ(rep["contact_summary"][2]["first_line"], 3);
+    EXPECT_EQ(rep["contact_summary"][2]["last_line"], 28);
+  }
+
   // Within the flutes: clean, exit 0.
   const std::string ok = dir.write("ok.nc", "T3 M6\nG0 X0 Y0 Z1\nG1 Z-0.8 F100\nG0 Z1\nM30\n");
   EXPECT_EQ(run_cli("run " + ok + " --tools " + tbl + " --stock-box -3,-3,-3,3,3,0 --voxel 0.02 -o " + outdir, &out, &err), 0)

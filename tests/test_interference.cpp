@@ -634,6 +634,47 @@ TEST(Interference, RapidThroughTheStockIsFlaggedAndARapidAboveIsNot) {
   EXPECT_EQ(sim::format_contact(r.contacts[0], "prog.nc").rfind("prog.nc:4: rapid contact (cutter) at least 40 um deep at (", 0), 0u);
 }
 
+// The contacts that matter most, out of many: a rapid first however
+// shallow, then the holder, shank and neck, then the deepest rubs; in
+// program order. The summary counts each kind and finds its deepest.
+TEST(Interference, MostSevereContactsPutCrashesBeforeRubs) {
+  std::vector<sim::Contact> cs;
+  auto add = [&](int line, const char* region, bool rapid, double depth, bool at_least = false) {
+    sim::Contact c;
+    c.line = line;
+    c.region = region;
+    c.rapid = rapid;
+    c.depth_mm = depth;
+    c.at_least = at_least;
+    cs.push_back(c);
+  };
+  for (int i = 0; i < 30; ++i) add(10 + i, "clearance-face", false, 1e-4 * (1 + i % 7));  // deepest 7e-4 at lines 16, 23, 30, 37
+  add(50, "shank", false, 2e-4);
+  add(60, "clearance-face", false, 1e-3, true);
+  add(70, "cutter", true, 1e-5);  // a rapid grazing the stock: still first
+  add(80, "holder", false, 1e-5);
+  const std::vector<std::size_t> top = sim::most_severe_contacts(cs, 6);
+  std::vector<int> lines;
+  for (const std::size_t i : top) lines.push_back(cs[i].line);
+  EXPECT_EQ(lines, (std::vector<int>{16, 23, 50, 60, 70, 80}));  // rapid, holder, shank, then 1e-3, 7e-4 twice (earliest)
+  // Fewer than asked: all of them, in order.
+  EXPECT_EQ(sim::most_severe_contacts(cs, 100).size(), cs.size());
+  EXPECT_EQ(sim::most_severe_contacts(cs, 100)[33], 33u);
+
+  const std::vector<sim::ContactKind> kinds = sim::summarize_contacts(cs);
+  ASSERT_EQ(kinds.size(), 4u);
+  EXPECT_EQ(kinds[0].region, "cutter");
+  EXPECT_TRUE(kinds[0].rapid);
+  EXPECT_EQ(kinds[1].region, "holder");
+  EXPECT_EQ(kinds[2].region, "shank");
+  EXPECT_EQ(kinds[3].region, "clearance-face");
+  EXPECT_EQ(kinds[3].records, 31u);
+  EXPECT_EQ(kinds[3].at_least, 1u);
+  EXPECT_EQ(cs[kinds[3].deepest].line, 60);
+  EXPECT_EQ(kinds[3].first_line, 10);
+  EXPECT_EQ(kinds[3].last_line, 60);
+}
+
 // A fly-cutter (spindle along Y) fed along X leaves one swing-radius arc
 // per revolution: the face is flat to within the scallop
 // R - sqrt(R^2 - f^2/4) (R = 5 mm, f = 1 mm/rev: 25.06 um).

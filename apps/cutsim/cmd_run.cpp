@@ -17,6 +17,7 @@
 #include "cutsim/io/atomic_file.h"
 #include "cutsim/io/gltf_writer.h"
 #include "cutsim/io/job.h"
+#include "cutsim/sim/interference.h"
 #include "cutsim/sim/report.h"
 #include "cutsim/sim/simulate.h"
 
@@ -194,14 +195,16 @@ Action add_run_command(CLI::App& app) {
     }
     res.timing.compare_s = since(t_cmp);
     const auto t_write = std::chrono::steady_clock::now();
-    // Contact markers: one node per contact (the first 200), named by its NC
-    // line; rapids magenta, clearance faces orange, neck/shank/holder yellow.
+    // Contact markers: one node per contact (the 200 that matter most:
+    // rapids, then holder, shank and neck, then the deepest), named by its
+    // NC line; rapids magenta, clearance faces orange, neck/shank/holder yellow.
     std::vector<TriMesh> markers;
     std::vector<std::string> marker_names;
-    const std::size_t n_markers = std::min<std::size_t>(res.contacts.size(), 200);
+    const std::vector<std::size_t> marked = sim::most_severe_contacts(res.contacts, 200);
+    const std::size_t n_markers = marked.size();
     markers.reserve(n_markers);
     for (std::size_t i = 0; i < n_markers; ++i) {
-      const auto& c = res.contacts[i];
+      const auto& c = res.contacts[marked[i]];
       markers.push_back(octahedron(c.where, std::max(8 * res.voxel_mm, c.depth_mm)));
       char name[96];
       std::snprintf(name, sizeof name, "contact line %d %s%s %.3g um", c.line, c.rapid ? "rapid " : "",
@@ -209,7 +212,7 @@ Action add_run_command(CLI::App& app) {
       marker_names.push_back(name);
     }
     for (std::size_t i = 0; i < n_markers; ++i) {
-      const auto& c = res.contacts[i];
+      const auto& c = res.contacts[marked[i]];
       const std::array<float, 4> col = c.rapid ? std::array<float, 4>{0.9f, 0.1f, 0.9f, 1.0f}
                                        : c.region == "clearance-face" ? std::array<float, 4>{1.0f, 0.45f, 0.0f, 1.0f}
                                                                       : std::array<float, 4>{0.95f, 0.85f, 0.1f, 1.0f};

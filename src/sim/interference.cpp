@@ -229,4 +229,53 @@ std::string format_contact(const Contact& c, const std::string& program) {
   return s;
 }
 
+int contact_severity(const Contact& c) {
+  if (c.rapid) return 0;
+  if (c.region == "holder") return 1;
+  if (c.region == "shank") return 2;
+  if (c.region == "neck") return 3;
+  return 4;  // the clearance face
+}
+
+std::vector<std::size_t> most_severe_contacts(const std::vector<Contact>& contacts, std::size_t n) {
+  std::vector<std::size_t> idx(contacts.size());
+  for (std::size_t i = 0; i < idx.size(); ++i) idx[i] = i;
+  if (idx.size() > n) {
+    auto before = [&](std::size_t a, std::size_t b) {
+      const int sa = contact_severity(contacts[a]), sb = contact_severity(contacts[b]);
+      if (sa != sb) return sa < sb;
+      if (contacts[a].depth_mm != contacts[b].depth_mm) return contacts[a].depth_mm > contacts[b].depth_mm;
+      return a < b;
+    };
+    std::nth_element(idx.begin(), idx.begin() + static_cast<std::ptrdiff_t>(n), idx.end(), before);
+    idx.resize(n);
+    std::sort(idx.begin(), idx.end());
+  }
+  return idx;
+}
+
+std::vector<ContactKind> summarize_contacts(const std::vector<Contact>& contacts) {
+  std::vector<ContactKind> kinds;
+  for (std::size_t i = 0; i < contacts.size(); ++i) {
+    const Contact& c = contacts[i];
+    auto it = std::find_if(kinds.begin(), kinds.end(),
+                           [&](const ContactKind& k) { return k.region == c.region && k.rapid == c.rapid; });
+    if (it == kinds.end()) {
+      kinds.push_back({c.region, c.rapid, 0, 0, i, c.line, c.line});
+      it = kinds.end() - 1;
+    }
+    ++it->records;
+    if (c.at_least) ++it->at_least;
+    if (c.depth_mm > contacts[it->deepest].depth_mm) it->deepest = i;
+    it->first_line = std::min(it->first_line, c.line);
+    it->last_line = std::max(it->last_line, c.line);
+  }
+  std::sort(kinds.begin(), kinds.end(), [&](const ContactKind& a, const ContactKind& b) {
+    const int sa = contact_severity(contacts[a.deepest]), sb = contact_severity(contacts[b.deepest]);
+    if (sa != sb) return sa < sb;
+    return a.region < b.region;
+  });
+  return kinds;
+}
+
 }  // namespace cutsim::sim

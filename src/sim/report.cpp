@@ -7,6 +7,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cutsim/sim/interference.h"
+
 namespace cutsim::sim {
 
 namespace {
@@ -91,6 +93,14 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
                   {"position_mm", {c.where.x(), c.where.y(), c.where.z()}}, {"depth_mm", c.depth_mm},
                   {"depth_at_least", c.at_least}, {"poses", c.poses}});
   j["contacts"] = cs;
+  nlohmann::ordered_json ks = nlohmann::ordered_json::array();
+  for (const ContactKind& k : summarize_contacts(r.contacts)) {
+    const Contact& d = r.contacts[k.deepest];
+    ks.push_back({{"region", k.region}, {"rapid", k.rapid}, {"records", k.records}, {"depth_at_least", k.at_least},
+                  {"first_line", k.first_line}, {"last_line", k.last_line}, {"deepest_line", d.line},
+                  {"deepest_mm", d.depth_mm}, {"deepest_at_least", d.at_least}});
+  }
+  j["contact_summary"] = ks;
   j["active_voxels"] = st.active_voxels;
   j["voxel_evaluations"] = st.voxel_evaluations;
   if (st.band_voxels) j["band_voxels"] = st.band_voxels;
@@ -147,9 +157,33 @@ std::string report_text(const SimResult& r, const ReportOutputs& out) {
   }
   if (r.axis_limit_violations.size() > shown)
     os << "... and " << r.axis_limit_violations.size() - shown << " more axis-limit violations (see the report)\n";
-  const std::size_t shown_c = std::min<std::size_t>(r.contacts.size(), 20);
-  for (std::size_t i = 0; i < shown_c; ++i) os << format_contact(r.contacts[i], r.program) << "\n";
-  if (r.contacts.size() > shown_c) os << "... and " << r.contacts.size() - shown_c << " more contacts (see the report)\n";
+  // Many contacts: a line per kind first, then the most severe of them.
+  constexpr std::size_t kShownContacts = 20;
+  if (r.contacts.size() > kShownContacts) {
+    os << r.contacts.size() << " contacts:\n";
+    for (const ContactKind& k : summarize_contacts(r.contacts)) {
+      const Contact& d = r.contacts[k.deepest];
+      const std::string kind = k.rapid ? "rapid (" + k.region + ")" : k.region;
+      const std::string lines = k.first_line == k.last_line
+                                    ? "on line " + std::to_string(k.first_line)
+                                    : "on lines " + std::to_string(k.first_line) + "-" + std::to_string(k.last_line);
+      std::snprintf(buf, sizeof buf, "  %s: %zu %s, deepest %s%.3g um at line %d", kind.c_str(), k.records, lines.c_str(),
+                    d.at_least ? "at least " : "", d.depth_mm * 1000, d.line);
+      os << buf;
+      // (A depth that reached the band is the band's: the deepest then is one.)
+      if (k.at_least) {
+        std::snprintf(buf, sizeof buf, "; %zu of them at least %.3g um (the stock's band)", k.at_least, d.depth_mm * 1000);
+        os << buf;
+      }
+      os << "\n";
+    }
+    os << "the " << kShownContacts
+       << " that matter most (rapids, then holder, shank and neck, then the deepest), in program order:\n";
+  }
+  for (const std::size_t i : most_severe_contacts(r.contacts, kShownContacts))
+    os << format_contact(r.contacts[i], r.program) << "\n";
+  if (r.contacts.size() > kShownContacts)
+    os << "... and " << r.contacts.size() - kShownContacts << " more contacts (see the report)\n";
   if (r.stopped_at_contact) os << "stopped at the first contact (stop_at_first_contact)\n";
   for (const auto& a : r.amplitude_limits) {
     std::snprintf(buf, sizeof buf, "amplitude limit %c at %.3g Hz: %.4g mm (%s)\n", a.axis, a.frequency_hz,

@@ -96,4 +96,27 @@ bool cuts_change_voxel(const std::vector<sweep::Sweep>& cuts, const stock::Stock
 /// `prog.nc:1234: clearance-face contact 0.8 um deep at (x, y, z): G1 X...`
 std::string format_contact(const Contact& c, const std::string& program);
 
+/// What a contact risks, the most first (0): a rapid into material (a
+/// crash), then the holder, the shank and the neck touching (collisions),
+/// then the clearance face (rubbing).
+int contact_severity(const Contact& c);
+
+/// The indices of the `n` contacts that matter most, in program order: by
+/// severity, deeper first within one, then the earlier. (A long program's
+/// many rubs of the clearance face must not hide a crash behind them.)
+std::vector<std::size_t> most_severe_contacts(const std::vector<Contact>& contacts, std::size_t n);
+
+/// The contacts of one kind (region, and whether on a rapid).
+struct ContactKind {
+  std::string region;
+  bool rapid = false;
+  std::size_t records = 0;   ///< contacts (one per line, region and motion)
+  std::size_t at_least = 0;  ///< of them, as deep as the stock's band shows ("at least")
+  std::size_t deepest = 0;   ///< index of the deepest (the first of equal depths)
+  int first_line = 0, last_line = 0;
+};
+
+/// One entry per kind present, the most severe kind first.
+std::vector<ContactKind> summarize_contacts(const std::vector<Contact>& contacts);
+
 }  // namespace cutsim::sim
