@@ -6,11 +6,14 @@
 #include <random>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "cutsim/core/error.h"
 #include "cutsim/cases/cases.h"
 #include "cutsim/machine/environment.h"
 #include "cutsim/machine/kinematics.h"
 #include "cutsim/sim/planner.h"
+#include "cutsim/sim/report.h"
 #include "cutsim/sim/simulate.h"
 #include "cutsim/io/job.h"
 #include "helpers.h"
@@ -247,6 +250,40 @@ std::string sts_program(bool normal_compensation, std::vector<int>* edge_lines, 
 // path peaks at about 1.86 m/s^2 at the lens edges, 93 % of the 2000 mm/s^2
 // limit. The same program at 150 rpm (accelerations scale with the square of
 // the speed) exceeds it there, and only there; keeping X steady never does.
+// Past 20 axis-limit records the console gives a line per axis and
+// quantity, then the 20 furthest over their limits in program order: the
+// one far over at the end is shown, the mild ones after the first 19 not.
+TEST(AxisLimits, ConsoleSummarisesManyRecordsAndShowsTheWorst) {
+  TempDir dir;
+  sim::SimResult r = run_program(dir, "G1 X1 F100\n", "flat:d=1", Aabb{Vec3(0, 0, -1), Vec3(2, 2, 0)}, 0.05);
+  for (int line = 10; line < 40; ++line) {
+    machine::AxisViolation v;
+    v.line = line;
+    v.axis = 'X';
+    v.quantity = "acceleration";
+    v.unit = "mm/s^2";
+    v.limit = 2000;
+    v.value = line == 39 ? 9000 : 2100 + line;  // line 39 far over; the others mildly, rising
+    r.axis_limit_violations.push_back(v);
+  }
+  const std::string out = sim::report_text(r, {});
+  EXPECT_NE(out.find("30 axis-limit violations:\n  X acceleration: 30 on lines 10-39, the most 9000 mm/s^2 at line 39 "
+                     "(limit 2000)\nthe 20 furthest over their limits, in program order:\n"),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find(":39: X acceleration 9000 mm/s^2 over the limit 2000"), std::string::npos) << out;
+  EXPECT_NE(out.find(":20: X acceleration 2120"), std::string::npos) << out;  // lines 20-39: the largest
+  EXPECT_EQ(out.find(":19: X acceleration"), std::string::npos) << out;
+  EXPECT_NE(out.find("... and 10 more axis-limit violations"), std::string::npos) << out;
+  const auto j = nlohmann::json::parse(sim::report_json(r, {}));
+  EXPECT_EQ(j["axis_limit_violations"].size(), 30u);
+  ASSERT_EQ(j["axis_limit_summary"].size(), 1u);
+  EXPECT_EQ(j["axis_limit_summary"][0]["records"], 30);
+  EXPECT_EQ(j["axis_limit_summary"][0]["worst_line"], 39);
+  EXPECT_EQ(j["axis_limit_summary"][0]["worst_value"], 9000.0);
+  EXPECT_EQ(j["axis_limit_summary"][0]["first_line"], 10);
+}
+
 TEST(SlowToolServo, NormalCompensationPeaksInXAtLensEdges) {
   TempDir dir;
   std::vector<int> edges;
@@ -289,6 +326,36 @@ TEST(SlowToolServo, AtSpeedNormalCompensationExceedsXLimitAtLensEdgesKeepXSteady
         << "line " << v.line << " is not at a lens edge";
   }
   EXPECT_GT(x_acc, 10);
+  // The summary of X's acceleration: its count, first and last lines, and
+  // the furthest over; the worst 5 of all records are the 5 largest excesses
+  // (the earlier of equal ones), in program order.
+  {
+    const auto kinds = machine::summarize_violations(a.violations);
+    const auto x = std::find_if(kinds.begin(), kinds.end(),
+                                [](const auto& k) { return k.axis == 'X' && k.quantity == "acceleration"; });
+    ASSERT_NE(x, kinds.end());
+    EXPECT_EQ(x->records, static_cast<std::size_t>(x_acc));
+    EXPECT_EQ(x->unit, "mm/s^2");
+    int first = 1 << 30, last = 0;
+    double most = 0;
+    for (const auto& v : a.violations)
+      if (v.axis == 'X' && v.quantity == "acceleration") {
+        first = std::min(first, v.line);
+        last = std::max(last, v.line);
+        most = std::max(most, v.value);
+      }
+    EXPECT_EQ(x->first_line, first);
+    EXPECT_EQ(x->last_line, last);
+    EXPECT_EQ(a.violations[x->worst].value, most);
+    const std::vector<std::size_t> worst = machine::worst_violations(a.violations, 5);
+    ASSERT_EQ(worst.size(), 5u);
+    EXPECT_TRUE(std::is_sorted(worst.begin(), worst.end()));
+    std::vector<double> ex;
+    for (const auto& v : a.violations) ex.push_back(machine::excess(v));
+    std::sort(ex.rbegin(), ex.rend());
+    for (const std::size_t i : worst) EXPECT_GE(machine::excess(a.violations[i]), ex[4]) << "record " << i;
+    EXPECT_EQ(machine::worst_violations(a.violations, a.violations.size() + 1).size(), a.violations.size());
+  }
 
   const sim::AxisReport b = sim::analyze_axes(steady, {}, "xzc");
   for (const auto& v : b.violations) EXPECT_NE(v.axis, 'X') << "line " << v.line << " " << v.quantity;

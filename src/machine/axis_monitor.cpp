@@ -1,6 +1,9 @@
 #include "cutsim/machine/axis_monitor.h"
 
+#include <algorithm>
 #include <cmath>
+
+#include "cutsim/core/ranking.h"
 
 namespace cutsim::machine {
 
@@ -80,6 +83,37 @@ void AxisMonitor::step(const JointValues& q, double dt, bool feed, int line, con
 void AxisMonitor::rest() {
   std::fill(v_.begin(), v_.end(), 0.0);
   moving_ = false;
+}
+
+double excess(const AxisViolation& a) { return a.limit > 0 ? a.value / a.limit : a.value; }
+
+std::vector<std::size_t> worst_violations(const std::vector<AxisViolation>& v, std::size_t n) {
+  return first_n_in_order(v.size(), n, [&](std::size_t a, std::size_t b) {
+    const double ea = excess(v[a]), eb = excess(v[b]);
+    if (ea != eb) return ea > eb;
+    return a < b;
+  });
+}
+
+std::vector<ViolationKind> summarize_violations(const std::vector<AxisViolation>& v) {
+  std::vector<ViolationKind> kinds;
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    const AxisViolation& a = v[i];
+    auto it = std::find_if(kinds.begin(), kinds.end(),
+                           [&](const ViolationKind& k) { return k.axis == a.axis && k.quantity == a.quantity; });
+    if (it == kinds.end()) {
+      kinds.push_back({a.axis, a.quantity, a.unit, a.limit, 0, i, a.line, a.line});
+      it = kinds.end() - 1;
+    }
+    ++it->records;
+    if (excess(a) > excess(v[it->worst])) it->worst = i;
+    it->first_line = std::min(it->first_line, a.line);
+    it->last_line = std::max(it->last_line, a.line);
+  }
+  std::sort(kinds.begin(), kinds.end(), [](const ViolationKind& a, const ViolationKind& b) {
+    return a.axis != b.axis ? a.axis < b.axis : a.quantity < b.quantity;
+  });
+  return kinds;
 }
 
 }  // namespace cutsim::machine

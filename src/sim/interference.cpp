@@ -6,6 +6,7 @@
 #include <limits>
 #include <vector>
 
+#include "cutsim/core/ranking.h"
 #include "cutsim/sweep/sweep.h"
 
 namespace cutsim::sim {
@@ -238,20 +239,12 @@ int contact_severity(const Contact& c) {
 }
 
 std::vector<std::size_t> most_severe_contacts(const std::vector<Contact>& contacts, std::size_t n) {
-  std::vector<std::size_t> idx(contacts.size());
-  for (std::size_t i = 0; i < idx.size(); ++i) idx[i] = i;
-  if (idx.size() > n) {
-    auto before = [&](std::size_t a, std::size_t b) {
-      const int sa = contact_severity(contacts[a]), sb = contact_severity(contacts[b]);
-      if (sa != sb) return sa < sb;
-      if (contacts[a].depth_mm != contacts[b].depth_mm) return contacts[a].depth_mm > contacts[b].depth_mm;
-      return a < b;
-    };
-    std::nth_element(idx.begin(), idx.begin() + static_cast<std::ptrdiff_t>(n), idx.end(), before);
-    idx.resize(n);
-    std::sort(idx.begin(), idx.end());
-  }
-  return idx;
+  return first_n_in_order(contacts.size(), n, [&](std::size_t a, std::size_t b) {
+    const int sa = contact_severity(contacts[a]), sb = contact_severity(contacts[b]);
+    if (sa != sb) return sa < sb;
+    if (contacts[a].depth_mm != contacts[b].depth_mm) return contacts[a].depth_mm > contacts[b].depth_mm;
+    return a < b;
+  });
 }
 
 std::vector<ContactKind> summarize_contacts(const std::vector<Contact>& contacts) {

@@ -69,6 +69,14 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
     v.push_back({{"line", a.line}, {"text", a.text ? *a.text : ""}, {"axis", std::string(1, a.axis)},
                  {"quantity", a.quantity}, {"value", a.value}, {"limit", a.limit}, {"unit", a.unit}});
   j["axis_limit_violations"] = v;
+  nlohmann::ordered_json vk = nlohmann::ordered_json::array();
+  for (const machine::ViolationKind& k : machine::summarize_violations(r.axis_limit_violations)) {
+    const machine::AxisViolation& w = r.axis_limit_violations[k.worst];
+    vk.push_back({{"axis", std::string(1, k.axis)}, {"quantity", k.quantity}, {"unit", k.unit}, {"limit", k.limit},
+                  {"records", k.records}, {"first_line", k.first_line}, {"last_line", k.last_line},
+                  {"worst_line", w.line}, {"worst_value", w.value}});
+  }
+  j["axis_limit_summary"] = vk;
   nlohmann::ordered_json al = nlohmann::ordered_json::array();
   for (const auto& a : r.amplitude_limits)
     al.push_back({{"axis", std::string(1, a.axis)}, {"frequency_hz", a.frequency_hz},
@@ -148,26 +156,39 @@ std::string report_text(const SimResult& r, const ReportOutputs& out) {
                   p.pv_detrended_mm * 1e6, p.height_mm.size());
     os << buf;
   }
-  const std::size_t shown = std::min<std::size_t>(r.axis_limit_violations.size(), 20);
-  for (std::size_t i = 0; i < shown; ++i) {
+  // Many records (of either kind): a line per kind first, then the 20 that
+  // matter most, in program order, then a count of the rest.
+  constexpr std::size_t kShown = 20;
+  auto line_span = [](int first, int last) {
+    return first == last ? "on line " + std::to_string(first)
+                         : "on lines " + std::to_string(first) + "-" + std::to_string(last);
+  };
+  if (r.axis_limit_violations.size() > kShown) {
+    os << r.axis_limit_violations.size() << " axis-limit violations:\n";
+    for (const machine::ViolationKind& k : machine::summarize_violations(r.axis_limit_violations)) {
+      const machine::AxisViolation& w = r.axis_limit_violations[k.worst];
+      std::snprintf(buf, sizeof buf, "  %c %s: %zu %s, the most %.4g %s at line %d (limit %.4g)\n", k.axis,
+                    k.quantity.c_str(), k.records, line_span(k.first_line, k.last_line).c_str(), w.value,
+                    k.unit.c_str(), w.line, k.limit);
+      os << buf;
+    }
+    os << "the " << kShown << " furthest over their limits, in program order:\n";
+  }
+  for (const std::size_t i : machine::worst_violations(r.axis_limit_violations, kShown)) {
     const auto& a = r.axis_limit_violations[i];
     std::snprintf(buf, sizeof buf, "%s:%d: %c %s %.4g %s over the limit %.4g: %s\n", r.program.c_str(), a.line, a.axis,
                   a.quantity.c_str(), a.value, a.unit.c_str(), a.limit, a.text ? a.text->c_str() : "");
     os << buf;
   }
-  if (r.axis_limit_violations.size() > shown)
-    os << "... and " << r.axis_limit_violations.size() - shown << " more axis-limit violations (see the report)\n";
-  // Many contacts: a line per kind first, then the most severe of them.
-  constexpr std::size_t kShownContacts = 20;
-  if (r.contacts.size() > kShownContacts) {
+  if (r.axis_limit_violations.size() > kShown)
+    os << "... and " << r.axis_limit_violations.size() - kShown << " more axis-limit violations (see the report)\n";
+  if (r.contacts.size() > kShown) {
     os << r.contacts.size() << " contacts:\n";
     for (const ContactKind& k : summarize_contacts(r.contacts)) {
       const Contact& d = r.contacts[k.deepest];
       const std::string kind = k.rapid ? "rapid (" + k.region + ")" : k.region;
-      const std::string lines = k.first_line == k.last_line
-                                    ? "on line " + std::to_string(k.first_line)
-                                    : "on lines " + std::to_string(k.first_line) + "-" + std::to_string(k.last_line);
-      std::snprintf(buf, sizeof buf, "  %s: %zu %s, deepest %s%.3g um at line %d", kind.c_str(), k.records, lines.c_str(),
+      std::snprintf(buf, sizeof buf, "  %s: %zu %s, deepest %s%.3g um at line %d", kind.c_str(), k.records,
+                    line_span(k.first_line, k.last_line).c_str(),
                     d.at_least ? "at least " : "", d.depth_mm * 1000, d.line);
       os << buf;
       // (A depth that reached the band is the band's: the deepest then is one.)
@@ -177,13 +198,13 @@ std::string report_text(const SimResult& r, const ReportOutputs& out) {
       }
       os << "\n";
     }
-    os << "the " << kShownContacts
+    os << "the " << kShown
        << " that matter most (rapids, then holder, shank and neck, then the deepest), in program order:\n";
   }
-  for (const std::size_t i : most_severe_contacts(r.contacts, kShownContacts))
+  for (const std::size_t i : most_severe_contacts(r.contacts, kShown))
     os << format_contact(r.contacts[i], r.program) << "\n";
-  if (r.contacts.size() > kShownContacts)
-    os << "... and " << r.contacts.size() - kShownContacts << " more contacts (see the report)\n";
+  if (r.contacts.size() > kShown)
+    os << "... and " << r.contacts.size() - kShown << " more contacts (see the report)\n";
   if (r.stopped_at_contact) os << "stopped at the first contact (stop_at_first_contact)\n";
   for (const auto& a : r.amplitude_limits) {
     std::snprintf(buf, sizeof buf, "amplitude limit %c at %.3g Hz: %.4g mm (%s)\n", a.axis, a.frequency_hz,

@@ -26,6 +26,26 @@ struct AxisViolation {
   std::string unit;
 };
 
+/// How far over its limit a record is: value / limit.
+double excess(const AxisViolation& a);
+
+/// The indices of the `n` records furthest over their limits (the earlier
+/// of equal ones), in program order.
+std::vector<std::size_t> worst_violations(const std::vector<AxisViolation>& v, std::size_t n);
+
+/// The records of one axis and quantity.
+struct ViolationKind {
+  char axis = 'X';
+  std::string quantity, unit;
+  double limit = 0;
+  std::size_t records = 0;
+  std::size_t worst = 0;  ///< index of the furthest over (the first of equal ones)
+  int first_line = 0, last_line = 0;
+};
+
+/// One entry per axis and quantity present, by axis, then quantity.
+std::vector<ViolationKind> summarize_violations(const std::vector<AxisViolation>& v);
+
 /// A ~ min{L/2, Vmax/(2 pi f), Amax/(4 pi^2 f^2)} for a sinusoid of frequency f.
 struct AmplitudeLimit {
   char axis = 'X';
