@@ -176,6 +176,10 @@ TEST(Cli, CheckWithAMachineFlagsTheLineAndExitsOne) {
   EXPECT_NE(out.find("sts.nc:15: X acceleration"), std::string::npos) << out << "the velocity steps back here";
   EXPECT_EQ(out.find("sts.nc:12: X"), std::string::npos) << out;
   EXPECT_EQ(out.find("sts.nc:16: X"), std::string::npos) << out;
+  // Under the header, a line per axis and quantity: X's acceleration on
+  // lines 13-15, against the xzc lathe's 2000 mm/s^2.
+  EXPECT_NE(out.find("axis-limit violations\n  X acceleration: 3 on lines 13-15, the most "), std::string::npos) << out;
+  EXPECT_NE(out.find("(limit 2000)\n"), std::string::npos) << out;
 }
 
 TEST(Edlen, StandardAirAndSensitivities) {
