@@ -8,6 +8,7 @@
 #include "commands.h"
 #include "cutsim/core/error.h"
 #include "cutsim/io/job.h"
+#include "cutsim/sim/report.h"
 #include "cutsim/sim/simulate.h"
 
 namespace cutsim::app {
@@ -62,12 +63,8 @@ Action add_check_command(CLI::App& app) {
       os << "machine " << ax.machine << ": program time " << ax.program_time_s << " s, "
          << ax.violations.size() << " axis-limit violations\n";
       // A line per axis and quantity, then every record (a lint's listing).
-      for (const machine::ViolationKind& k : machine::summarize_violations(ax.violations)) {
-        const machine::AxisViolation& w = ax.violations[k.worst];
-        os << "  " << k.axis << " " << k.quantity << ": " << k.records << " on lines " << k.first_line << "-"
-           << k.last_line << ", the most " << w.value << " " << k.unit << " at line " << w.line << " (limit " << k.limit
-           << ")\n";
-      }
+      for (const machine::ViolationKind& k : machine::summarize_violations(ax.violations))
+        os << "  " << sim::format_violation_kind(k, ax.violations) << "\n";
       for (const auto& a : ax.violations)
         os << args->program << ":" << a.line << ": " << a.axis << " " << a.quantity << " " << a.value << " " << a.unit
            << " over the limit " << a.limit << ": " << (a.text ? *a.text : "") << "\n";

@@ -96,19 +96,13 @@ std::vector<std::size_t> worst_violations(const std::vector<AxisViolation>& v, s
 }
 
 std::vector<ViolationKind> summarize_violations(const std::vector<AxisViolation>& v) {
+  const RecordGroups g = group_records(
+      v.size(), [&](std::size_t a, std::size_t b) { return v[a].axis == v[b].axis && v[a].quantity == v[b].quantity; },
+      [&](std::size_t a, std::size_t b) { return excess(v[a]) > excess(v[b]); }, [&](std::size_t i) { return v[i].line; });
   std::vector<ViolationKind> kinds;
-  for (std::size_t i = 0; i < v.size(); ++i) {
-    const AxisViolation& a = v[i];
-    auto it = std::find_if(kinds.begin(), kinds.end(),
-                           [&](const ViolationKind& k) { return k.axis == a.axis && k.quantity == a.quantity; });
-    if (it == kinds.end()) {
-      kinds.push_back({a.axis, a.quantity, a.unit, a.limit, 0, i, a.line, a.line});
-      it = kinds.end() - 1;
-    }
-    ++it->records;
-    if (excess(a) > excess(v[it->worst])) it->worst = i;
-    it->first_line = std::min(it->first_line, a.line);
-    it->last_line = std::max(it->last_line, a.line);
+  for (const RecordGroups::Group& k : g.groups) {
+    const AxisViolation& a = v[k.first];
+    kinds.push_back({a.axis, a.quantity, a.unit, a.limit, k.records, k.worst, k.first_line, k.last_line});
   }
   std::sort(kinds.begin(), kinds.end(), [](const ViolationKind& a, const ViolationKind& b) {
     return a.axis != b.axis ? a.axis < b.axis : a.quantity < b.quantity;

@@ -248,21 +248,18 @@ std::vector<std::size_t> most_severe_contacts(const std::vector<Contact>& contac
 }
 
 std::vector<ContactKind> summarize_contacts(const std::vector<Contact>& contacts) {
+  const RecordGroups g = group_records(
+      contacts.size(),
+      [&](std::size_t a, std::size_t b) {
+        return contacts[a].region == contacts[b].region && contacts[a].rapid == contacts[b].rapid;
+      },
+      [&](std::size_t a, std::size_t b) { return contacts[a].depth_mm > contacts[b].depth_mm; },
+      [&](std::size_t i) { return contacts[i].line; });
   std::vector<ContactKind> kinds;
-  for (std::size_t i = 0; i < contacts.size(); ++i) {
-    const Contact& c = contacts[i];
-    auto it = std::find_if(kinds.begin(), kinds.end(),
-                           [&](const ContactKind& k) { return k.region == c.region && k.rapid == c.rapid; });
-    if (it == kinds.end()) {
-      kinds.push_back({c.region, c.rapid, 0, 0, i, c.line, c.line});
-      it = kinds.end() - 1;
-    }
-    ++it->records;
-    if (c.at_least) ++it->at_least;
-    if (c.depth_mm > contacts[it->deepest].depth_mm) it->deepest = i;
-    it->first_line = std::min(it->first_line, c.line);
-    it->last_line = std::max(it->last_line, c.line);
-  }
+  for (const RecordGroups::Group& k : g.groups)
+    kinds.push_back({contacts[k.first].region, contacts[k.first].rapid, k.records, 0, k.worst, k.first_line, k.last_line});
+  for (std::size_t i = 0; i < contacts.size(); ++i)
+    if (contacts[i].at_least) ++kinds[g.group_of[i]].at_least;
   std::sort(kinds.begin(), kinds.end(), [&](const ContactKind& a, const ContactKind& b) {
     const int sa = contact_severity(contacts[a.deepest]), sb = contact_severity(contacts[b.deepest]);
     if (sa != sb) return sa < sb;

@@ -12,6 +12,12 @@
 namespace cutsim::sim {
 
 namespace {
+
+// `on line 7` or `on lines 7-12`.
+std::string line_span(int first, int last) {
+  return first == last ? "on line " + std::to_string(first)
+                       : "on lines " + std::to_string(first) + "-" + std::to_string(last);
+}
 nlohmann::json box_json(const Aabb& b) {
   return {b.min.x(), b.min.y(), b.min.z(), b.max.x(), b.max.y(), b.max.z()};
 }
@@ -136,6 +142,14 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
   return j.dump(2) + "\n";
 }
 
+std::string format_violation_kind(const machine::ViolationKind& k, const std::vector<machine::AxisViolation>& v) {
+  const machine::AxisViolation& w = v[k.worst];
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "%c %s: %zu %s, the most %.4g %s at line %d (limit %.4g)", k.axis, k.quantity.c_str(),
+                k.records, line_span(k.first_line, k.last_line).c_str(), w.value, k.unit.c_str(), w.line, k.limit);
+  return buf;
+}
+
 std::string report_text(const SimResult& r, const ReportOutputs& out) {
   std::ostringstream os;
   char buf[512];
@@ -159,19 +173,10 @@ std::string report_text(const SimResult& r, const ReportOutputs& out) {
   // Many records (of either kind): a line per kind first, then the 20 that
   // matter most, in program order, then a count of the rest.
   constexpr std::size_t kShown = 20;
-  auto line_span = [](int first, int last) {
-    return first == last ? "on line " + std::to_string(first)
-                         : "on lines " + std::to_string(first) + "-" + std::to_string(last);
-  };
   if (r.axis_limit_violations.size() > kShown) {
     os << r.axis_limit_violations.size() << " axis-limit violations:\n";
-    for (const machine::ViolationKind& k : machine::summarize_violations(r.axis_limit_violations)) {
-      const machine::AxisViolation& w = r.axis_limit_violations[k.worst];
-      std::snprintf(buf, sizeof buf, "  %c %s: %zu %s, the most %.4g %s at line %d (limit %.4g)\n", k.axis,
-                    k.quantity.c_str(), k.records, line_span(k.first_line, k.last_line).c_str(), w.value,
-                    k.unit.c_str(), w.line, k.limit);
-      os << buf;
-    }
+    for (const machine::ViolationKind& k : machine::summarize_violations(r.axis_limit_violations))
+      os << "  " << format_violation_kind(k, r.axis_limit_violations) << "\n";
     os << "the " << kShown << " furthest over their limits, in program order:\n";
   }
   for (const std::size_t i : machine::worst_violations(r.axis_limit_violations, kShown)) {

@@ -31,4 +31,9 @@ std::string comparison_text(const compare::CompareResult& c);
 /// A short human summary (several lines).
 std::string report_text(const SimResult& r, const ReportOutputs& out);
 
+/// One axis and quantity's records in a line (`X acceleration: 398 on lines
+/// 205-39806, the most 2222 mm/s^2 at line 16005 (limit 2000)`), no newline;
+/// `v` the records `k` was made from. Shared by run and check.
+std::string format_violation_kind(const machine::ViolationKind& k, const std::vector<machine::AxisViolation>& v);
+
 }  // namespace cutsim::sim
