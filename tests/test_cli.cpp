@@ -1,8 +1,13 @@
 // The cutsim binary as a user runs it: errors with file:line:col, exit
 // codes, no output files on failure, and reproducible results.
+#include <sys/mman.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 
+#include <cctype>
+#include <cstdint>
 #include <cstdlib>
+#include <fstream>
 #include <cstring>
 #include <unistd.h>
 #include <nlohmann/json.hpp>
@@ -471,6 +476,54 @@ TEST(HugePages, TunableAddedOnceAndTheUsersStands) {
   EXPECT_EQ(tunables_with_huge_pages("glibc.malloc.hugetlb=0"), std::nullopt);
   EXPECT_EQ(tunables_with_huge_pages("glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1"), std::nullopt);
   EXPECT_EQ(tunables_with_huge_pages("glibc.malloc.hugetlbx=1"), "glibc.malloc.hugetlbx=1:glibc.malloc.hugetlb=1");
+}
+
+// The export's guard: while it lives, memory touched for the first time
+// comes in 4 KB pages even where madvise asks for huge ones; after, the
+// process is as it was (and a guard inside another leaves it to the outer).
+namespace {
+// AnonHugePages of the mapping that starts at `at`, kB (/proc/self/smaps).
+long anon_huge_kb(const void* at) {
+  std::ifstream in("/proc/self/smaps");
+  std::string line;
+  bool mine = false;
+  while (std::getline(in, line)) {
+    if (std::isxdigit(static_cast<unsigned char>(line[0])) && line.find('-') != std::string::npos &&
+        line.find(':') > line.find(' ')) {
+      mine = std::stoull(line.substr(0, line.find('-')), nullptr, 16) == reinterpret_cast<std::uintptr_t>(at);
+    } else if (mine && line.rfind("AnonHugePages:", 0) == 0) {
+      return std::stol(line.substr(14));
+    }
+  }
+  return -1;
+}
+}  // namespace
+
+TEST(HugePages, ExportGuardTouchesNewMemoryInSmallPages) {
+  ASSERT_EQ(::prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0), 0);
+  {
+    const SmallPagesForNewMemory outer;
+    ASSERT_TRUE(outer.active());
+    EXPECT_EQ(::prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0), 1);
+    {
+      const SmallPagesForNewMemory inner;
+      EXPECT_FALSE(inner.active());
+    }
+    EXPECT_EQ(::prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0), 1);
+    // 8 MB, 2 MB aligned, asking for huge pages, written through.
+    const std::size_t n = 8u << 20;
+    void* raw = ::mmap(nullptr, n + (2u << 20), PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    ASSERT_NE(raw, MAP_FAILED);
+    const auto base = reinterpret_cast<std::uintptr_t>(raw);
+    auto* p = reinterpret_cast<char*>((base + (2u << 20) - 1) & ~std::uintptr_t((2u << 20) - 1));
+    // (Its own mapping, so that smaps lists it from p.)
+    if (reinterpret_cast<char*>(raw) != p) ::munmap(raw, static_cast<std::size_t>(p - reinterpret_cast<char*>(raw)));
+    ::madvise(p, n, MADV_HUGEPAGE);
+    std::memset(p, 1, n);
+    EXPECT_EQ(anon_huge_kb(p), 0);
+    ::munmap(raw, n + (2u << 20));
+  }
+  EXPECT_EQ(::prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0), 0);
 }
 
 // cutsim starts itself again with huge pages asked for (where the kernel

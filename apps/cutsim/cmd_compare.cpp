@@ -9,6 +9,7 @@
 
 #include "commands.h"
 #include "cutsim/core/error.h"
+#include "cutsim/core/huge_pages.h"
 #include "cutsim/io/atomic_file.h"
 #include "cutsim/io/job.h"
 #include "cutsim/io/mesh_io.h"
@@ -47,6 +48,7 @@ Action add_compare_command(CLI::App& app) {
   cmd->add_option("--format", a->format, "console output: text or json")->check(CLI::IsMember({"text", "json"}));
 
   return [a]() -> int {
+    const SmallPagesForNewMemory small_pages;  // (all of its memory is new: see huge_pages.h)
     if (!fs::exists(a->machined)) throw InputError(a->machined, "no such file");
     if (!fs::exists(a->target)) throw InputError(a->target, "no such file");
     io::Job job;

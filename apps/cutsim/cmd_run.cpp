@@ -14,6 +14,7 @@
 #include "commands.h"
 #include "outputs.h"
 #include "cutsim/core/error.h"
+#include "cutsim/core/huge_pages.h"
 #include "cutsim/io/atomic_file.h"
 #include "cutsim/io/gltf_writer.h"
 #include "cutsim/io/job.h"
@@ -176,6 +177,7 @@ Action add_run_command(CLI::App& app) {
     const auto t_exp = std::chrono::steady_clock::now();
     res.timing.peak_rss_simulate_mb = sim::peak_rss_mb();
     auto since = [](auto t) { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count(); };
+    const SmallPagesForNewMemory small_pages;  // (the export's memory is new, and written once)
     const TriMesh mesh = res.stock->surface_mesh(args->mesh_adaptivity);
     res.timing.mesh_s = since(t_exp);
     const auto t_cmp = std::chrono::steady_clock::now();

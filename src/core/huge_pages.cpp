@@ -1,6 +1,7 @@
 #include "cutsim/core/huge_pages.h"
 
 #include <malloc.h>
+#include <sys/prctl.h>
 #include <unistd.h>
 
 #include <climits>
@@ -67,6 +68,15 @@ void keep_freed_memory() {
   ::mallopt(M_MMAP_THRESHOLD, 32 << 20);  // (glibc's largest)
   ::mallopt(M_TRIM_THRESHOLD, INT_MAX);
   ::mallopt(M_TOP_PAD, 64 << 20);
+}
+
+SmallPagesForNewMemory::SmallPagesForNewMemory() {
+  // (Only where huge pages were on: a process that had them off keeps it.)
+  if (::prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0) == 0) set_ = ::prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0) == 0;
+}
+
+SmallPagesForNewMemory::~SmallPagesForNewMemory() {
+  if (set_) ::prctl(PR_SET_THP_DISABLE, 0, 0, 0, 0);
 }
 
 void reexec_with_huge_pages(char** argv) {
