@@ -674,6 +674,77 @@ Chain chain_of(const std::string& tool, const std::vector<Vec3>& tips, std::size
 }
 }  // namespace
 
+TEST(Sweep, PrismDrawnBackOverACrestLiesInTheCut) {
+  // Over a crest (the slope falls from move to move, as a V tool planes
+  // over the snowflake's dome) the Joiner closes each joint by drawing the
+  // next prism back 2 half widths along its own line instead of a
+  // JointPrim. The longer prism must lie in the moves' cut: where it is
+  // negative, the ball of that radius lies in the union of the prisms as
+  // the moves made them (26 points of its surface), and outside it is no
+  // nearer than that union.
+  const double w = 0.001;  // the band's half width: 2 um drawn back
+  const tool::Tool v = tool::parse_tool_spec("vtool:angle=90,h=0.05", "test");
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  const Aabb reach{Vec3(-1, -1, -1), Vec3(1, 1, 0.01)};  // the V's top (50 um up) stays above it
+  auto run = [&](auto z, int n, double step, const Aabb& r, std::vector<sweep::ProfilePrim>* made,
+                 std::vector<sweep::ProfilePrim>* drawn) {
+    sweep::Joiner join(w, r);
+    for (int k = 0; k < n; ++k) {
+      sweep::Sweep s = sweep::sweep_line(Vec3(step * k, 0, z(step * k)), Vec3(step * (k + 1), 0, z(step * (k + 1))), I, v);
+      if (made) made->push_back(std::get<sweep::ProfilePrim>(s.prims[0]));
+      join(s);
+      if (drawn) drawn->push_back(std::get<sweep::ProfilePrim>(s.prims[0]));
+    }
+    join.finish();
+    return std::make_pair(join.extended(), join.joints());
+  };
+  auto crest = [](double x) { return -0.01 - 0.5 * (x - 0.01) * (x - 0.01) - 0.02 * x; };  // slope falls
+  std::vector<sweep::ProfilePrim> made, drawn;
+  const auto [ext, joints] = run(crest, 10, 0.002, reach, &made, &drawn);
+  EXPECT_EQ(ext, 9u);  // every joint: the first prism alone is 2 um, as far as is drawn back
+  EXPECT_EQ(joints, 0u);
+  auto uni = [&](const Vec3& p) {
+    double d = std::numeric_limits<double>::infinity();
+    for (const auto& q : made) d = std::min(d, sweep::distance(sweep::Primitive(q), p));
+    return d;
+  };
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1, 1);
+  int inside = 0;
+  for (std::size_t k = 1; k < drawn.size(); ++k) {
+    const sweep::Primitive ext_k(drawn[k]);
+    EXPECT_NEAR((drawn[k].origin - made[k].origin).x(), -2 * w, 1e-12);
+    const Vec3 at = made[k].origin;  // the joint
+    for (int i = 0; i < 4000; ++i) {
+      const Vec3 p = at + Vec3(0.003 * u(rng), 0.012 * u(rng), 0.006 + 0.008 * u(rng));
+      const double d = sweep::distance(ext_k, p), un = uni(p);
+      if (d >= 0) {
+        ASSERT_GE(d, un - 1e-12) << "outside at " << p.transpose();
+        continue;
+      }
+      ++inside;
+      for (int dx = -1; dx <= 1; ++dx)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dz = -1; dz <= 1; ++dz) {
+            if (dx == 0 && dy == 0 && dz == 0) continue;
+            const Vec3 q = p + (-d) * (1 - 1e-9) * Vec3(dx, dy, dz).normalized();
+            ASSERT_LE(uni(q), 1e-12) << "ball about " << p.transpose() << " radius " << -d;
+          }
+    }
+  }
+  EXPECT_GT(inside, 5000);
+  // Drawn back over a valley it would stand below the path: JointPrims.
+  auto valley = [](double x) { return -0.02 + 0.5 * (x - 0.01) * (x - 0.01) + 0.02 * x; };  // slope rises
+  EXPECT_EQ(run(valley, 10, 0.002, reach, nullptr, nullptr), std::make_pair(std::size_t{0}, std::size_t{10}));
+  // Moves of 1.5 um: the crest must have run 2 um behind a joint.
+  EXPECT_EQ(run(crest, 10, 0.0015, reach, nullptr, nullptr).first, 8u);
+  // Where the V's top reaches into the material, its lifted strip would
+  // cut there: JointPrims (a straight line lifts nothing: drawn back).
+  const Aabb deep{Vec3(-1, -1, -1), Vec3(1, 1, 0.1)};
+  EXPECT_EQ(run(crest, 10, 0.002, deep, nullptr, nullptr).first, 0u);
+  EXPECT_EQ(run([](double) { return -0.01; }, 10, 0.002, deep, nullptr, nullptr).first, 9u);
+}
+
 TEST(Sweep, JointPieceLiesInThePrismsAndBoundsTheirUnionsDepth) {
   // Where moves of a V (or nose) tool follow each other at one orientation,
   // a prism's joint piece with its neighbours must hold (sweep::JointPrim):

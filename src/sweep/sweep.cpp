@@ -421,32 +421,91 @@ std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim
   return jp;
 }
 
-void Joiner::emit(Sweep& s, const ProfilePrim* after) {
+ProfilePrim extended_back(const ProfilePrim& p, double length) {
+  const Eigen::Matrix3d Rl = p.to_local.transpose();
+  const Vec3 tip1 = p.origin + Rl * p.d_local;
+  const double f = length / std::fabs(p.d_local.x());
+  return make_profile(p.origin - f * (Rl * p.d_local), tip1, p.edge, Rl);  // (p.edge's turn is in Rl)
+}
+
+namespace {
+// A prism's slope along the cut (its rise per unit of local x), and
+// whether it moves without a sideways part (the V's section then only
+// rises or falls along its own axis).
+double slope(const ProfilePrim& p) { return p.d_local.z() / std::fabs(p.d_local.x()); }
+bool upright(const ProfilePrim& p) { return std::fabs(p.d_local.y()) <= 1e-12 * std::fabs(p.d_local.x()); }
+// A pointed V, planing: its section lifted along its axis lies inside itself.
+bool liftable(const ProfilePrim& p) {
+  return p.prism && p.edge.nose_radius == 0 && upright(p) && lipschitz(Primitive(p));
+}
+}  // namespace
+
+bool Joiner::may_extend(const ProfilePrim& next) const {
+  const double length = 2 * half_width_;
+  if (!last_ || reach_.empty() || !(half_width_ > 0) || !liftable(*last_) || !liftable(next)) return false;
+  // A crest (the slope falls), run for the whole length behind the joint.
+  if (!(slope(next) <= slope(*last_)) || run_ < length) return false;
+  // Behind the joint the line runs at most `lift` above the path: the
+  // drawn-back V stands out of the cut only by its top's strip that high,
+  // which must lie outside the material's reach.
+  const double lift = length * (run_slope_ - slope(next));
+  if (lift <= 1e-12) return true;
+  Aabb strip = tool::shape_bounds(tool::Shape(next.edge));
+  strip.min.z() = strip.max.z() - lift;
+  const Eigen::Matrix3d Rl = next.to_local.transpose();
+  const Vec3 back = next.origin - (length / std::fabs(next.d_local.x())) * (Rl * next.d_local);
+  Aabb box = world_box(strip, Rl, back);
+  box.extend(world_box(strip, Rl, next.origin));
+  return !box.overlaps(reach_.expanded(lift));
+}
+
+void Joiner::emit(Sweep& s, const ProfilePrim* before, const ProfilePrim* after) {
   if (!last_) return;
-  if (auto j = joint_prim(before_ ? &*before_ : nullptr, *last_, after, half_width_, reach_)) {
+  if (auto j = joint_prim(before, *last_, after, half_width_, reach_)) {
     s.bounds.extend(j->bounds);
     s.prims.emplace_back(*j);
+    ++joints_;
   }
 }
 
 void Joiner::operator()(Sweep& s) {
-  const ProfilePrim* first = s.prims.empty() ? nullptr : std::get_if<ProfilePrim>(&s.prims.front());
+  ProfilePrim* first = s.prims.empty() ? nullptr : std::get_if<ProfilePrim>(&s.prims.front());
   const ProfilePrim* last = s.prims.empty() ? nullptr : std::get_if<ProfilePrim>(&s.prims.back());
   const bool joins = last_ && first && joinable(*last_, *first);
+  const bool extend = joins && s.prims.size() == 1 && may_extend(*first);
+  // The crest run ending at this sweep's last prism (as it was given).
+  if (extend || (joins && s.prims.size() == 1 && liftable(*last_) && liftable(*first) && slope(*first) <= slope(*last_))) {
+    run_ += std::fabs(first->d_local.x());
+  } else if (last && s.prims.size() == 1) {
+    run_ = std::fabs(last->d_local.x());
+    run_slope_ = slope(*last);
+  } else {
+    run_ = 0;
+  }
   // (s's own prisms are copied first: emit appends to s.prims.)
   std::optional<ProfilePrim> next_before, next_last;
   if (last) next_last = *last;
-  if (joins && s.prims.size() == 1) next_before = *last_;
-  emit(s, joins ? first : nullptr);
+  if (joins && !extend && s.prims.size() == 1) next_before = *last_;
+  if (extend) {
+    *first = extended_back(*first, 2 * half_width_);
+    s.bounds.extend(first->bounds);
+    next_last = *first;
+    ++extended_;
+  }
+  // last_'s JointPrim: at its start unless it was drawn back there (then
+  // before_ is empty), at its end unless `first` is drawn back over it.
+  // (Last: appending to s.prims may move `first`.)
+  emit(s, before_ ? &*before_ : nullptr, joins && !extend ? first : nullptr);
   before_ = std::move(next_before);
   last_ = std::move(next_last);
 }
 
 Sweep Joiner::finish() {
   Sweep s;
-  emit(s, nullptr);
+  emit(s, before_ ? &*before_ : nullptr, nullptr);
   before_.reset();
   last_.reset();
+  run_ = 0;
   return s;
 }
 

@@ -251,23 +251,49 @@ bool joinable(const ProfilePrim& a, const ProfilePrim& b);
 std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim& mid, const ProfilePrim* after,
                                     double half_width, const Aabb& reach);
 
-/// Gives each prism of consecutive moves its JointPrim: the sweeps must
-/// come in the program's order, every move's (an empty sweep breaks the
-/// chain). A prism's piece needs the move after it, so it is added to that
-/// move's sweep, and the last one's to what `finish` returns.
+/// Closes the joints of consecutive moves' prisms: the sweeps must come in
+/// the program's order, every move's (an empty sweep breaks the chain).
+///
+/// Where the path turns over a crest (its slope along the cut falls, the
+/// sideways part nil) and has run that way for twice `half_width` before
+/// the joint, the new prism is drawn back that far along its own line
+/// instead (extended_back): behind the joint that line runs above the
+/// path, and a V lifted along its own axis lies inside itself, so the
+/// longer prism is still inside the cut (the strip its lifted top adds
+/// must lie outside `reach`). Beside the joint each voxel then has a
+/// prism whose cap is at least `half_width` away, deeper being clamped
+/// alike, so no JointPrim is needed there: one prism distance a voxel,
+/// where a joint took three (the snowflake's dome is all crests).
+///
+/// Elsewhere (a valley, a sideways move, a short run) each prism gets its
+/// JointPrim, which needs the move after it, so it is added to that move's
+/// sweep, and the last one's to what `finish` returns.
 class Joiner {
  public:
   Joiner(double half_width, const Aabb& reach) : half_width_(half_width), reach_(reach) {}
   void operator()(Sweep& s);
   /// The last prism's piece, once the moves have ended (empty if none).
   Sweep finish();
+  /// Joints closed by drawing a prism back (no JointPrim), and JointPrims made.
+  std::size_t extended() const { return extended_; }
+  std::size_t joints() const { return joints_; }
 
  private:
-  void emit(Sweep& s, const ProfilePrim* after);
+  void emit(Sweep& s, const ProfilePrim* before, const ProfilePrim* after);
+  // Whether `next` (joinable after last_) may be drawn back over the joint.
+  bool may_extend(const ProfilePrim& next) const;
   double half_width_;
   Aabb reach_;
-  std::optional<ProfilePrim> before_, last_;  // the last prism and the one before it, where joinable
+  std::optional<ProfilePrim> before_, last_;  // the last prism and the one before it, where joined by a JointPrim
+  // The crest run ending at last_'s end: its length along the cut, and its
+  // steepest slope (its first prism's, as slopes fall along a crest).
+  double run_ = 0, run_slope_ = 0;
+  std::size_t extended_ = 0, joints_ = 0;
 };
+
+/// `p` drawn back along its own line by `length` (along the cut, its local
+/// x), its box grown to match.
+ProfilePrim extended_back(const ProfilePrim& p, double length);
 
 /// Fly-cutter revolutions: the swing torus at each pose.
 Sweep sweep_tori(const std::vector<Pose>& poses, const tool::SwingTorus& torus);
