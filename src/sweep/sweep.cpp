@@ -350,6 +350,15 @@ const Aabb& bounds(const Primitive& p) {
   return std::visit([](const auto& q) -> const Aabb& { return q.bounds; }, p);
 }
 
+namespace {
+// A pointed edge (a V tool) moved in the plane of its cutting direction and
+// its axis (planing, lifting and lowering).
+bool planing(const ProfilePrim& p) {
+  const Vec3& d = p.d_local;
+  return p.edge.nose_radius == 0 && p.prism && std::fabs(d.y()) <= 1e-12 * d.norm();
+}
+}  // namespace
+
 bool lipschitz(const Primitive& p) {
   if (const auto* lp = std::get_if<LinearPrim>(&p)) return lp->kind != LinearPrim::Case::general;
   if (const auto* pp = std::get_if<ProfilePrim>(&p)) {
@@ -358,8 +367,7 @@ bool lipschitz(const Primitive& p) {
     // is the largest of their plane distances inside. A sideways component
     // leans the two sides differently (a jump inside, on the bisector); a
     // round nose leans its tangent planes differently too.
-    const Vec3& d = pp->d_local;
-    return pp->edge.nose_radius == 0 && pp->prism && std::fabs(d.y()) <= 1e-12 * d.norm();
+    return planing(*pp);
   }
   // The largest of 1-Lipschitz distances (the prisms', a slab's, a box's).
   if (const auto* jp = std::get_if<JointPrim>(&p)) return jp->lipschitz;
@@ -421,6 +429,9 @@ std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim
   return jp;
 }
 
+namespace {
+// `p` drawn back along its own line by `length` (along the cut, its local
+// x), its box grown to match.
 ProfilePrim extended_back(const ProfilePrim& p, double length) {
   const Eigen::Matrix3d Rl = p.to_local.transpose();
   const Vec3 tip1 = p.origin + Rl * p.d_local;
@@ -428,35 +439,31 @@ ProfilePrim extended_back(const ProfilePrim& p, double length) {
   return make_profile(p.origin - f * (Rl * p.d_local), tip1, p.edge, Rl);  // (p.edge's turn is in Rl)
 }
 
-namespace {
-// A prism's slope along the cut (its rise per unit of local x), and
-// whether it moves without a sideways part (the V's section then only
-// rises or falls along its own axis).
+// A prism's slope along the cut: its rise per unit of local x.
 double slope(const ProfilePrim& p) { return p.d_local.z() / std::fabs(p.d_local.x()); }
-bool upright(const ProfilePrim& p) { return std::fabs(p.d_local.y()) <= 1e-12 * std::fabs(p.d_local.x()); }
-// A pointed V, planing: its section lifted along its axis lies inside itself.
-bool liftable(const ProfilePrim& p) {
-  return p.prism && p.edge.nose_radius == 0 && upright(p) && lipschitz(Primitive(p));
-}
+
+// `b` after `a` turns over a crest: both V tools planing (a V's section
+// lifted along its axis lies inside itself), the slope not rising.
+bool crest(const ProfilePrim& a, const ProfilePrim& b) { return planing(a) && planing(b) && slope(b) <= slope(a); }
 }  // namespace
 
-bool Joiner::may_extend(const ProfilePrim& next) const {
+std::optional<ProfilePrim> Joiner::drawn_back(const ProfilePrim& next) const {
   const double length = 2 * half_width_;
-  if (!last_ || reach_.empty() || !(half_width_ > 0) || !liftable(*last_) || !liftable(next)) return false;
-  // A crest (the slope falls), run for the whole length behind the joint.
-  if (!(slope(next) <= slope(*last_)) || run_ < length) return false;
+  // A crest, run for the whole length behind the joint.
+  if (!last_ || reach_.empty() || !(half_width_ > 0) || !crest(*last_, next) || run_ < length) return std::nullopt;
+  ProfilePrim drawn = extended_back(next, length);
   // Behind the joint the line runs at most `lift` above the path: the
   // drawn-back V stands out of the cut only by its top's strip that high,
   // which must lie outside the material's reach.
   const double lift = length * (run_slope_ - slope(next));
-  if (lift <= 1e-12) return true;
+  if (lift <= 1e-12) return drawn;
   Aabb strip = tool::shape_bounds(tool::Shape(next.edge));
   strip.min.z() = strip.max.z() - lift;
   const Eigen::Matrix3d Rl = next.to_local.transpose();
-  const Vec3 back = next.origin - (length / std::fabs(next.d_local.x())) * (Rl * next.d_local);
-  Aabb box = world_box(strip, Rl, back);
+  Aabb box = world_box(strip, Rl, drawn.origin);
   box.extend(world_box(strip, Rl, next.origin));
-  return !box.overlaps(reach_.expanded(lift));
+  if (box.overlaps(reach_.expanded(lift))) return std::nullopt;
+  return drawn;
 }
 
 void Joiner::emit(Sweep& s, const ProfilePrim* before, const ProfilePrim* after) {
@@ -472,11 +479,13 @@ void Joiner::operator()(Sweep& s) {
   ProfilePrim* first = s.prims.empty() ? nullptr : std::get_if<ProfilePrim>(&s.prims.front());
   const ProfilePrim* last = s.prims.empty() ? nullptr : std::get_if<ProfilePrim>(&s.prims.back());
   const bool joins = last_ && first && joinable(*last_, *first);
-  const bool extend = joins && s.prims.size() == 1 && may_extend(*first);
+  const bool single = s.prims.size() == 1;
+  std::optional<ProfilePrim> drawn = joins && single ? drawn_back(*first) : std::nullopt;
+  const bool extend = drawn.has_value();
   // The crest run ending at this sweep's last prism (as it was given).
-  if (extend || (joins && s.prims.size() == 1 && liftable(*last_) && liftable(*first) && slope(*first) <= slope(*last_))) {
+  if (extend || (joins && single && crest(*last_, *first))) {
     run_ += std::fabs(first->d_local.x());
-  } else if (last && s.prims.size() == 1) {
+  } else if (last && single) {
     run_ = std::fabs(last->d_local.x());
     run_slope_ = slope(*last);
   } else {
@@ -485,9 +494,9 @@ void Joiner::operator()(Sweep& s) {
   // (s's own prisms are copied first: emit appends to s.prims.)
   std::optional<ProfilePrim> next_before, next_last;
   if (last) next_last = *last;
-  if (joins && !extend && s.prims.size() == 1) next_before = *last_;
+  if (joins && !extend && single) next_before = *last_;
   if (extend) {
-    *first = extended_back(*first, 2 * half_width_);
+    *first = std::move(*drawn);
     s.bounds.extend(first->bounds);
     next_last = *first;
     ++extended_;

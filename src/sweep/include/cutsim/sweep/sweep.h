@@ -257,7 +257,7 @@ std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim
 /// Where the path turns over a crest (its slope along the cut falls, the
 /// sideways part nil) and has run that way for twice `half_width` before
 /// the joint, the new prism is drawn back that far along its own line
-/// instead (extended_back): behind the joint that line runs above the
+/// instead: behind the joint that line runs above the
 /// path, and a V lifted along its own axis lies inside itself, so the
 /// longer prism is still inside the cut (the strip its lifted top adds
 /// must lie outside `reach`). Beside the joint each voxel then has a
@@ -280,8 +280,8 @@ class Joiner {
 
  private:
   void emit(Sweep& s, const ProfilePrim* before, const ProfilePrim* after);
-  // Whether `next` (joinable after last_) may be drawn back over the joint.
-  bool may_extend(const ProfilePrim& next) const;
+  // `next` (joinable after last_) drawn back over the joint, where it may be.
+  std::optional<ProfilePrim> drawn_back(const ProfilePrim& next) const;
   double half_width_;
   Aabb reach_;
   std::optional<ProfilePrim> before_, last_;  // the last prism and the one before it, where joined by a JointPrim
@@ -290,10 +290,6 @@ class Joiner {
   double run_ = 0, run_slope_ = 0;
   std::size_t extended_ = 0, joints_ = 0;
 };
-
-/// `p` drawn back along its own line by `length` (along the cut, its local
-/// x), its box grown to match.
-ProfilePrim extended_back(const ProfilePrim& p, double length);
 
 /// Fly-cutter revolutions: the swing torus at each pose.
 Sweep sweep_tori(const std::vector<Pose>& poses, const tool::SwingTorus& torus);
