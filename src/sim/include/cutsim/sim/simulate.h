@@ -51,13 +51,6 @@ struct SimOptions {
   /// Moves whose contact scans run side by side before they are checked
   /// in order (the results do not depend on it; 1: one move at a time).
   std::size_t check_group = 8;
-  /// Cuts held back and subtracted in batches (false: each move's cut is
-  /// subtracted before the next move is checked; the results are the
-  /// same, the reference for tests).
-  bool hold_cuts = true;
-  /// How many of the latest held cuts a contact test weighs voxel by voxel
-  /// (the results do not depend on it).
-  std::size_t latest_cuts = InterferenceChecker::kLatestCuts;
   /// Bounds of the target, when there is one: a target that misses the
   /// stock is refused before any grid is built.
   std::optional<Aabb> target_bounds;
