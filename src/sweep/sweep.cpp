@@ -466,9 +466,9 @@ std::optional<ProfilePrim> Joiner::drawn_back(const ProfilePrim& next) const {
   return drawn;
 }
 
-void Joiner::emit(Sweep& s, const ProfilePrim* before, const ProfilePrim* after) {
+void Joiner::emit(Sweep& s, const ProfilePrim* after) {
   if (!last_) return;
-  if (auto j = joint_prim(before, *last_, after, half_width_, reach_)) {
+  if (auto j = joint_prim(before_ ? &*before_ : nullptr, *last_, after, half_width_, reach_)) {
     s.bounds.extend(j->bounds);
     s.prims.emplace_back(*j);
     ++joints_;
@@ -504,14 +504,14 @@ void Joiner::operator()(Sweep& s) {
   // last_'s JointPrim: at its start unless it was drawn back there (then
   // before_ is empty), at its end unless `first` is drawn back over it.
   // (Last: appending to s.prims may move `first`.)
-  emit(s, before_ ? &*before_ : nullptr, joins && !extend ? first : nullptr);
+  emit(s, joins && !extend ? first : nullptr);
   before_ = std::move(next_before);
   last_ = std::move(next_last);
 }
 
 Sweep Joiner::finish() {
   Sweep s;
-  emit(s, before_ ? &*before_ : nullptr, nullptr);
+  emit(s, nullptr);
   before_.reset();
   last_.reset();
   run_ = 0;

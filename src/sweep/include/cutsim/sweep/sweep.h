@@ -279,7 +279,8 @@ class Joiner {
   std::size_t joints() const { return joints_; }
 
  private:
-  void emit(Sweep& s, const ProfilePrim* before, const ProfilePrim* after);
+  // last_'s JointPrim (with before_ and `after`, where joined), added to s.
+  void emit(Sweep& s, const ProfilePrim* after);
   // `next` (joinable after last_) drawn back over the joint, where it may be.
   std::optional<ProfilePrim> drawn_back(const ProfilePrim& next) const;
   double half_width_;
