@@ -745,6 +745,87 @@ TEST(Sweep, PrismDrawnBackOverACrestLiesInTheCut) {
   EXPECT_EQ(run([](double) { return -0.01; }, 10, 0.002, deep, nullptr, nullptr).first, 9u);
 }
 
+TEST(Sweep, CrestPieceLiesInThePrismsAndGivesTheFlanksDepth) {
+  // Over a crest the cut is the union of the two prisms drawn on over the
+  // joint (sweep::crest_prim): where the piece is negative, the ball of
+  // that radius lies in the union of the moves' prisms (26 points of its
+  // surface; the moves before and after close it, as on a path), outside
+  // it is no nearer than that union, and it is 1-Lipschitz. Sharp crests,
+  // gentle ones, a short move before the joint, and a crest that follows
+  // a valley.
+  const double w = 0.001;
+  const tool::Tool v = tool::parse_tool_spec("vtool:angle=90,h=0.05", "test");
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  const std::vector<std::vector<Vec3>> paths = {
+      {Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.0035, 0, 0.003), Vec3(0.0135, 0, 0.003), Vec3(0.02, 0, 0.003)},  // rise, flat
+      {Vec3(-0.01, 0, 0), Vec3(0, 0, 0), Vec3(0.002, 0, 0.0002), Vec3(0.012, 0, 0.0005), Vec3(0.02, 0, 0.0005)},  // gentle
+      {Vec3(-0.01, 0, 0.004), Vec3(0, 0, 0.004), Vec3(0.0035, 0, 0.004), Vec3(0.0135, 0, 0.001), Vec3(0.02, 0, 0.001)},  // fall
+      {Vec3(-0.01, 0, 0), Vec3(0, 0, 0.003), Vec3(0.0015, 0, 0.0045), Vec3(0.0115, 0, 0.0), Vec3(0.02, 0, 0.0)},  // 1.5 um
+  };
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (std::size_t pi = 0; pi < paths.size(); ++pi) {
+    const auto& tips = paths[pi];
+    std::vector<sweep::Primitive> prisms;
+    std::vector<sweep::ProfilePrim> pp;
+    for (std::size_t i = 0; i + 1 < tips.size(); ++i) {
+      prisms.push_back(sweep::sweep_line(tips[i], tips[i + 1], I, v).prims[0]);
+      pp.push_back(std::get<sweep::ProfilePrim>(prisms.back()));
+    }
+    // The crest between the second and third moves.
+    const auto c = sweep::crest_prim(pp[1], pp[2], w, Aabb{});
+    ASSERT_TRUE(c.has_value()) << pi;
+    const sweep::Primitive crest(*c);
+    EXPECT_TRUE(sweep::lipschitz(crest));
+    auto uni = [&](const Vec3& p) {
+      double d = std::numeric_limits<double>::infinity();
+      for (const auto& q : prisms) d = std::min(d, sweep::distance(q, p));
+      return d;
+    };
+    const Vec3 at = tips[2];  // the joint
+    int inside = 0;
+    for (int i = 0; i < 20000; ++i) {
+      const Vec3 p = at + Vec3(0.004 * u(rng), 0.01 * u(rng), 0.004 + 0.006 * u(rng));
+      const double g = sweep::distance(crest, p), un = uni(p);
+      if (g >= 0) {
+        ASSERT_GE(g, un - 1e-12) << pi << " outside at " << p.transpose();
+        continue;
+      }
+      ++inside;
+      for (int dx = -1; dx <= 1; ++dx)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dz = -1; dz <= 1; ++dz) {
+            if (dx == 0 && dy == 0 && dz == 0) continue;
+            const Vec3 q = p + (-g) * (1 - 1e-9) * Vec3(dx, dy, dz).normalized();
+            ASSERT_LE(uni(q), 1e-12) << pi << " ball about " << p.transpose() << " radius " << -g;
+          }
+    }
+    EXPECT_GT(inside, 1000) << pi;
+    double worst = 0;
+    for (int i = 0; i < 20000; ++i) {
+      const Vec3 p = at + Vec3(0.004 * u(rng), 0.01 * u(rng), 0.004 + 0.006 * u(rng));
+      const Vec3 q = p + 0.001 * Vec3(u(rng), u(rng), u(rng));
+      worst = std::max(worst, std::fabs(sweep::distance(crest, p) - sweep::distance(crest, q)) / (p - q).norm());
+    }
+    EXPECT_LE(worst, 1 + 1e-9) << pi;
+  }
+  // A rise of slope 6/7 then flat: 1 um before the joint, 2 um above the
+  // path. Each prism says at most 1 um deep there (the rise's end cap);
+  // the intersection of the two drawn on (a valley's piece) less still;
+  // the crest's piece, the rise's flank: 2 um / sqrt 2, leaning by the
+  // slope (its normal ~ (-6/7, -1, 1)), with its slab reaching 3 um back
+  // (a 1.5 um band).
+  const auto& tips = paths[0];
+  const sweep::ProfilePrim rise = std::get<sweep::ProfilePrim>(sweep::sweep_line(tips[1], tips[2], I, v).prims[0]);
+  const sweep::ProfilePrim flat = std::get<sweep::ProfilePrim>(sweep::sweep_line(tips[2], tips[3], I, v).prims[0]);
+  const Vec3 p(0.0025, 0, 0.003 * 2.5 / 3.5 + 0.002);
+  const double s = 0.003 / 0.0035, flank = 0.002 / std::sqrt(2.0) / std::sqrt(1 + s * s / 2);
+  EXPECT_GE(sweep::distance(sweep::Primitive(rise), p), -0.001 - 1e-15);
+  EXPECT_GE(sweep::distance(sweep::Primitive(flat), p), 0.0);
+  EXPECT_GT(sweep::distance(sweep::Primitive(*sweep::joint_prim(nullptr, rise, &flat, 0.0015, Aabb{})), p), -0.001);
+  EXPECT_NEAR(sweep::distance(sweep::Primitive(*sweep::crest_prim(rise, flat, 0.0015, Aabb{})), p), -flank, 1e-12);
+}
+
 TEST(Sweep, JointPieceLiesInThePrismsAndBoundsTheirUnionsDepth) {
   // Where moves of a V (or nose) tool follow each other at one orientation,
   // a prism's joint piece with its neighbours must hold (sweep::JointPrim):

@@ -383,9 +383,10 @@ bool joinable(const ProfilePrim& a, const ProfilePrim& b) {
   return (a.origin + a.to_local.transpose() * a.d_local - b.origin).norm() <= 1e-9;
 }
 
-std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim& mid, const ProfilePrim* after,
-                                    double half_width, const Aabb& reach) {
-  if ((!before && !after) || !(half_width > 0)) return std::nullopt;
+namespace {
+// A JointPrim's frame, edge and factors, from `mid` (the others joinable
+// with it), its slab and box left to the caller.
+JointPrim joint_base(const ProfilePrim* before, const ProfilePrim& mid, const ProfilePrim* after) {
   JointPrim jp;
   jp.to_local = mid.to_local;
   auto side = [](const ProfilePrim& p) {
@@ -407,24 +408,55 @@ std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim
   jp.sin_half = mid.sin_half;
   jp.cos_half = mid.cos_half;
   jp.sign = mid.d_local.x() > 0 ? 1.0 : -1.0;
-  jp.half_width = half_width;
   jp.lipschitz = lipschitz(Primitive(mid)) && (!before || lipschitz(Primitive(*before))) &&
                  (!after || lipschitz(Primitive(*after)));
-  // Its box: the cross-sections within the slab (each prism's moves
-  // linearly, so those at the ends of each one's part hold the rest), of
-  // the part of the profile that reaches into `reach`.
-  const Eigen::Matrix3d Rl = mid.to_local.transpose();
-  const Vec3 end = mid.origin + Rl * mid.d_local;
+  return jp;
+}
+
+// The box of the profile's cross-sections with their tips at `tips` (each
+// prism's part moves linearly, so those at its part's ends hold the rest),
+// of the part of the profile that reaches into `reach`; empty where none.
+Aabb sections_box(const JointPrim& jp, std::initializer_list<Vec3> tips, const Aabb& reach) {
+  const Eigen::Matrix3d Rl = jp.to_local.transpose();
   const tool::Shape shape(jp.edge);
   Aabb box;
-  auto section = [&](const Vec3& t) {
+  for (const Vec3& t : tips)
     box.extend(reach.empty() ? world_box(tool::shape_bounds(shape), Rl, t) : world_box_within(shape, Rl, t, reach));
-  };
-  section(mid.origin);
-  section(end);
-  if (before) section(mid.origin - std::min(1.0, half_width / std::fabs(before->d_local.x())) * (Rl * before->d_local));
-  if (after) section(end + std::min(1.0, half_width / std::fabs(after->d_local.x())) * (Rl * after->d_local));
-  jp.bounds = reach.empty() ? box : box.intersected(reach);
+  return reach.empty() ? box : box.intersected(reach);
+}
+}  // namespace
+
+std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim& mid, const ProfilePrim* after,
+                                    double half_width, const Aabb& reach) {
+  if ((!before && !after) || !(half_width > 0)) return std::nullopt;
+  JointPrim jp = joint_base(before, mid, after);
+  jp.slab_lo = -half_width;
+  jp.slab_hi = std::fabs(mid.d_local.x()) + half_width;
+  const Eigen::Matrix3d Rl = mid.to_local.transpose();
+  const Vec3 end = mid.origin + Rl * mid.d_local;
+  const Vec3 start_before =
+      before ? Vec3(mid.origin - std::min(1.0, half_width / std::fabs(before->d_local.x())) * (Rl * before->d_local)) : mid.origin;
+  const Vec3 end_after =
+      after ? Vec3(end + std::min(1.0, half_width / std::fabs(after->d_local.x())) * (Rl * after->d_local)) : end;
+  jp.bounds = sections_box(jp, {mid.origin, end, start_before, end_after}, reach);
+  if (jp.bounds.empty()) return std::nullopt;
+  return jp;
+}
+
+std::optional<JointPrim> crest_prim(const ProfilePrim& mid, const ProfilePrim& after, double half_width,
+                                    const Aabb& reach) {
+  if (!(half_width > 0)) return std::nullopt;
+  JointPrim jp = joint_base(nullptr, mid, &after);
+  jp.crest = true;
+  const double lm = std::fabs(mid.d_local.x()), la = std::fabs(after.d_local.x());
+  const double back = std::min(2 * half_width, lm), on = std::min(2 * half_width, la);
+  jp.slab_lo = lm - back;
+  jp.slab_hi = lm + on;
+  // The sections at the slab's faces on both lines drawn on, and at the joint.
+  const Eigen::Matrix3d Rl = mid.to_local.transpose();
+  const Vec3 joint = mid.origin + Rl * mid.d_local;
+  const Vec3 dm = Rl * mid.d_local / lm, da = Rl * after.d_local / la;  // per unit along the cut
+  jp.bounds = sections_box(jp, {joint - back * dm, joint + on * dm, joint - back * da, joint + on * da}, reach);
   if (jp.bounds.empty()) return std::nullopt;
   return jp;
 }
@@ -449,8 +481,14 @@ bool crest(const ProfilePrim& a, const ProfilePrim& b) { return planing(a) && pl
 
 std::optional<ProfilePrim> Joiner::drawn_back(const ProfilePrim& next) const {
   const double length = 2 * half_width_;
-  // A crest, run for the whole length behind the joint.
+  // A crest, run for the whole length behind the joint, whose slope falls
+  // by no more than 0.01 within half_width of it (from last_'s slope, or
+  // the run's first where last_ is shorter): there the drawn-back line runs
+  // at most 1 % of half_width above the path, and the voxels that take
+  // their depth from it read no more than that shallow.
   if (!last_ || reach_.empty() || !(half_width_ > 0) || !crest(*last_, next) || run_ < length) return std::nullopt;
+  const double behind = std::fabs(last_->d_local.x()) >= half_width_ ? slope(*last_) : run_slope_;
+  if (behind - slope(next) > 0.01) return std::nullopt;
   ProfilePrim drawn = extended_back(next, length);
   // Behind the joint the line runs at most `lift` above the path: the
   // drawn-back V stands out of the cut only by its top's strip that high,
@@ -494,7 +532,12 @@ void Joiner::operator()(Sweep& s) {
   // (s's own prisms are copied first: emit appends to s.prims.)
   std::optional<ProfilePrim> next_before, next_last;
   if (last) next_last = *last;
-  if (joins && !extend && single) next_before = *last_;
+  // A crest not drawn back over: its own piece, and neither prism's
+  // JointPrim reaches across it.
+  std::optional<JointPrim> over_crest;
+  const bool crest_piece = joins && !extend && crest(*last_, *first);
+  if (crest_piece) over_crest = crest_prim(*last_, *first, half_width_, reach_);
+  if (joins && !extend && !crest_piece && single) next_before = *last_;
   if (extend) {
     *first = std::move(*drawn);
     s.bounds.extend(first->bounds);
@@ -502,9 +545,14 @@ void Joiner::operator()(Sweep& s) {
     ++extended_;
   }
   // last_'s JointPrim: at its start unless it was drawn back there (then
-  // before_ is empty), at its end unless `first` is drawn back over it.
-  // (Last: appending to s.prims may move `first`.)
-  emit(s, joins && !extend ? first : nullptr);
+  // before_ is empty), at its end unless `first` is drawn back over it or
+  // the joint is a crest. (Last: appending to s.prims may move `first`.)
+  emit(s, joins && !extend && !crest_piece ? first : nullptr);
+  if (over_crest) {
+    s.bounds.extend(over_crest->bounds);
+    s.prims.emplace_back(*over_crest);
+    ++crests_;
+  }
   before_ = std::move(next_before);
   last_ = std::move(next_last);
 }

@@ -90,6 +90,19 @@ struct ProfilePrim {
 /// one's distance is one of its parts), so only its inside matters
 /// (interior_only); its box term makes its distance no less than the way
 /// to its box.
+///
+/// That is a valley's shape: where the path's slope rises at a joint, the
+/// cut beside it is the intersection of the two prisms drawn on. Over a
+/// crest (the slope falls) the cut is their union, and the intersection
+/// lies below it by up to the slopes' difference times the way from the
+/// joint: too shallow. A crest's piece (`crest`, crest_prim) is the union
+/// of the middle prism drawn on past its end and the one after drawn
+/// back before its start, within a slab about the joint no longer than
+/// either prism (there each drawn-on part lies in the other prism's cut:
+/// over a crest each line runs above the other beyond the joint), with
+/// its box. Its depth, the larger of the two prisms', is the distance to
+/// the nearer of their flank planes, which is the union's but where the
+/// nearest point is on the crease itself.
 struct JointPrim {
   /// One prism: its start and its move in the shared frame, with
   /// ProfilePrim's factors (so that each part is worked out as the prism's
@@ -105,7 +118,11 @@ struct JointPrim {
   tool::EdgeProfile edge;
   double sin_half = 0, cos_half = 1;
   double sign = 1;        ///< +1 where the moves run along the frame's +x, -1 along -x
-  double half_width = 0;  ///< how far the slab reaches past the middle prism's ends, along x
+  /// The slab, along the cut from the middle prism's start (sign * local x):
+  /// a valley's piece reaches the band past the middle prism's ends, a
+  /// crest's about the joint at its end.
+  double slab_lo = 0, slab_hi = 0;
+  bool crest = false;     ///< a crest's piece: the union of mid (drawn on) and after (drawn back)
   bool lipschitz = false; ///< the prisms' distances are (sweep::lipschitz)
   Aabb bounds;
 };
@@ -251,6 +268,14 @@ bool joinable(const ProfilePrim& a, const ProfilePrim& b);
 std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim& mid, const ProfilePrim* after,
                                     double half_width, const Aabb& reach);
 
+/// The piece for the crest where `after` starts at `mid`'s end (joinable,
+/// the slope falling): the union of the two drawn on over the joint, in a
+/// slab reaching up to twice `half_width` each way from it but no farther
+/// than either prism's length, within its box in `reach`; nothing where it
+/// has no box.
+std::optional<JointPrim> crest_prim(const ProfilePrim& mid, const ProfilePrim& after, double half_width,
+                                    const Aabb& reach);
+
 /// Closes the joints of consecutive moves' prisms: the sweeps must come in
 /// the program's order, every move's (an empty sweep breaks the chain).
 ///
@@ -263,20 +288,26 @@ std::optional<JointPrim> joint_prim(const ProfilePrim* before, const ProfilePrim
 /// must lie outside `reach`). Beside the joint each voxel then has a
 /// prism whose cap is at least `half_width` away, deeper being clamped
 /// alike, so no JointPrim is needed there: one prism distance a voxel,
-/// where a joint took three (the snowflake's dome is all crests).
+/// where a joint took three (the snowflake's dome is all crests). The
+/// drawn-back line runs above the path by up to the slopes' difference
+/// times the way back, so a voxel it holds reads that much too shallow:
+/// only where that is within 1 % of `half_width` at `half_width` back.
 ///
-/// Elsewhere (a valley, a sideways move, a short run) each prism gets its
-/// JointPrim, which needs the move after it, so it is added to that move's
-/// sweep, and the last one's to what `finish` returns.
+/// A sharper crest, or a shorter run, gets a crest's piece (crest_prim);
+/// elsewhere (a valley, a sideways move) each prism gets its JointPrim.
+/// Both need the move after the joint, so they are added to that move's
+/// sweep, and the last prism's JointPrim to what `finish` returns.
 class Joiner {
  public:
   Joiner(double half_width, const Aabb& reach) : half_width_(half_width), reach_(reach) {}
   void operator()(Sweep& s);
   /// The last prism's piece, once the moves have ended (empty if none).
   Sweep finish();
-  /// Joints closed by drawing a prism back (no JointPrim), and JointPrims made.
+  /// Joints closed by drawing a prism back (no JointPrim), JointPrims made
+  /// for valleys (and where a prism joins none), and crests' pieces.
   std::size_t extended() const { return extended_; }
   std::size_t joints() const { return joints_; }
+  std::size_t crests() const { return crests_; }
 
  private:
   // last_'s JointPrim (with before_ and `after`, where joined), added to s.
@@ -289,7 +320,7 @@ class Joiner {
   // The crest run ending at last_'s end: its length along the cut, and its
   // steepest slope (its first prism's, as slopes fall along a crest).
   double run_ = 0, run_slope_ = 0;
-  std::size_t extended_ = 0, joints_ = 0;
+  std::size_t extended_ = 0, joints_ = 0, crests_ = 0;
 };
 
 /// Fly-cutter revolutions: the swing torus at each pose.
@@ -502,7 +533,8 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
 }
 
 // A JointPrim's distance, the largest of its box's, the slab's and its
-// prisms' (the middle one's first), where that is below `lim`; else a value
+// prisms' (the middle one's first; a crest's: the least of its two
+// prisms'), where that is below `lim`; else a value
 // no more than it and no less than `lim`, from the parts worked out until
 // one reached `lim`.
 [[gnu::always_inline]] inline double joint_distance_below(const JointPrim& jp, const Vec3& w, double lim) {
@@ -515,8 +547,14 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   const Eigen::Matrix3d& m = jp.to_local;
   const double along = jp.sign * (m(0, 0) * (w.x() - jp.mid.origin.x()) + m(0, 1) * (w.y() - jp.mid.origin.y()) +
                                   m(0, 2) * (w.z() - jp.mid.origin.z()));
-  g = std::max(g, std::max(-jp.half_width - along, along - jp.sign * jp.mid.d.x() - jp.half_width));  // the slab
+  g = std::max(g, std::max(jp.slab_lo - along, along - jp.slab_hi));  // the slab
   if (g >= lim) return g;
+  if (jp.crest) {
+    // The union: the larger depth of the two, where either is below g.
+    const double a = joint_part(jp, jp.mid, w, true, false);
+    if (a <= g) return g;
+    return std::max(g, std::min(a, joint_part(jp, jp.after, w, false, true)));
+  }
   g = std::max(g, joint_part(jp, jp.mid, w, !jp.has_before, !jp.has_after));
   if (g >= lim) return g;
   if (jp.has_before) g = std::max(g, joint_part(jp, jp.before, w, true, false));
