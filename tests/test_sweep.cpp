@@ -1,5 +1,6 @@
 // Swept-envelope distances against densely sampled tool poses.
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <random>
 #include <string>
@@ -651,6 +652,21 @@ TEST(Sweep, VToolPrismIsItsPlanesInsideAndTheExtrusionOfItsSectionOutside) {
 
 namespace cutsim::test {
 namespace {
+// Whether the ball of `radius` about `p` lies in the region `uni` is
+// negative in, as far as 26 points of its surface tell.
+::testing::AssertionResult ball_inside(const Vec3& p, double radius, const std::function<double(const Vec3&)>& uni) {
+  for (int dx = -1; dx <= 1; ++dx)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dz = -1; dz <= 1; ++dz) {
+        if (dx == 0 && dy == 0 && dz == 0) continue;
+        const Vec3 q = p + radius * (1 - 1e-9) * Vec3(dx, dy, dz).normalized();
+        if (uni(q) > 1e-12)
+          return ::testing::AssertionFailure() << "ball about " << p.transpose() << " radius " << radius << ": "
+                                               << q.transpose() << " outside by " << uni(q);
+      }
+  return ::testing::AssertionSuccess();
+}
+
 // Straight moves of `tool` through `tips` at orientation R: their prisms,
 // and the joint piece of prism `mid` with its neighbours, slab half width w.
 struct Chain {
@@ -723,13 +739,7 @@ TEST(Sweep, PrismDrawnBackOverACrestLiesInTheCut) {
         continue;
       }
       ++inside;
-      for (int dx = -1; dx <= 1; ++dx)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dz = -1; dz <= 1; ++dz) {
-            if (dx == 0 && dy == 0 && dz == 0) continue;
-            const Vec3 q = p + (-d) * (1 - 1e-9) * Vec3(dx, dy, dz).normalized();
-            ASSERT_LE(uni(q), 1e-12) << "ball about " << p.transpose() << " radius " << -d;
-          }
+      ASSERT_TRUE(ball_inside(p, -d, uni));
     }
   }
   EXPECT_GT(inside, 5000);
@@ -792,13 +802,7 @@ TEST(Sweep, CrestPieceLiesInThePrismsAndGivesTheFlanksDepth) {
         continue;
       }
       ++inside;
-      for (int dx = -1; dx <= 1; ++dx)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dz = -1; dz <= 1; ++dz) {
-            if (dx == 0 && dy == 0 && dz == 0) continue;
-            const Vec3 q = p + (-g) * (1 - 1e-9) * Vec3(dx, dy, dz).normalized();
-            ASSERT_LE(uni(q), 1e-12) << pi << " ball about " << p.transpose() << " radius " << -g;
-          }
+      ASSERT_TRUE(ball_inside(p, -g, uni)) << pi;
     }
     EXPECT_GT(inside, 1000) << pi;
     double worst = 0;
@@ -874,13 +878,7 @@ TEST(Sweep, JointPieceLiesInThePrismsAndBoundsTheirUnionsDepth) {
       ++inside;
       ASSERT_LE(un, 0.0) << k.tool << " at " << p.transpose();
       if (!k.lipschitz) continue;  // a first-order depth: the sign only
-      for (int dx = -1; dx <= 1; ++dx)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dz = -1; dz <= 1; ++dz) {
-            if (dx == 0 && dy == 0 && dz == 0) continue;
-            const Vec3 q = p + (-g) * (1 - 1e-9) * Vec3(dx, dy, dz).normalized();
-            ASSERT_LE(uni(q), 1e-12) << k.tool << " ball about " << p.transpose() << " radius " << -g;
-          }
+      ASSERT_TRUE(ball_inside(p, -g, uni)) << k.tool;
     }
     EXPECT_GT(inside, 1000) << k.tool;
     if (k.lipschitz) {
