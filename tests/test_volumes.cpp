@@ -823,35 +823,102 @@ double below_v_distance(double y, double z, double c) {
   return u / std::sqrt(2.0);
 }
 
+// A 90 deg V groove along X at Y = 0 whose tip runs through (xs, zs).
+struct VGroove {
+  std::vector<double> xs, zs;
+
+  double tip(double x) const {
+    for (std::size_t k = 0; k + 1 < xs.size(); ++k)
+      if (x <= xs[k + 1]) return zs[k] + (zs[k + 1] - zs[k]) * (x - xs[k]) / (xs[k + 1] - xs[k]);
+    return zs.back();
+  }
+  // The exact signed distance to the groove's material (below the
+  // grooves' surface; the top face ignored): the least over slices x' of
+  // the way to the material (or, from the material, to the cut) of that
+  // slice's V, sampled at h / 64 along X within 3 voxels (the slices'
+  // distance is smooth).
+  double exact(const Vec3& p, double h) const {
+    const double inside = below_v_distance(p.y(), p.z(), tip(p.x())) > 0 ? 1.0 : -1.0;
+    double best = std::numeric_limits<double>::infinity();
+    for (int i = -3 * 64; i <= 3 * 64; ++i) {
+      const double dx = i * h / 64, d = below_v_distance(p.y(), p.z(), tip(p.x() + dx));
+      best = std::min(best, std::hypot(dx, inside > 0 ? std::max(d, 0.0) : std::max(-d, 0.0)));
+    }
+    return inside * best;
+  }
+};
+
+// A V groove over steps: flat runs of 5 moves of 3.5 um joined by single
+// moves that rise or fall 3 um, from (0, -12 um).
+VGroove stepped_groove() {
+  VGroove g{{0.0}, {-0.012}};
+  for (int k = 0; g.xs.size() < 41; ++k) {
+    const int phase = k % 12;
+    g.xs.push_back(g.xs.back() + 0.0035);
+    g.zs.push_back(g.zs.back() + (phase == 5 ? 0.003 : phase == 11 ? -0.003 : 0.0));
+  }
+  return g;
+}
+
+struct ExactCheck {
+  int air = 0, material = 0, air_off = 0, material_off = 0;
+  double air_worst = 0, material_worst = 0;
+};
+// The stock's voxels within 1.5 voxels of the groove (exactly), away from
+// its ends and 3 voxels below the top (another surface), against the
+// exact distance: off where the error is over 4 % of a voxel in the cut
+// and a quarter in the material.
+ExactCheck check_against_exact(const stock::Stock& stock, const VGroove& g, double h) {
+  ExactCheck c;
+  const Vec3 origin = stock.roi_lattice_origin();  // a voxel's centre
+  auto first = [&](double v, int k) { return static_cast<int>(std::ceil((v - origin[k]) / h)); };
+  for (int ix = first(0.004, 0); origin.x() + ix * h < g.xs.back() - 0.004; ++ix)
+    for (int iy = first(-0.02, 1); origin.y() + iy * h < 0.02; ++iy)
+      for (int iz = first(-0.025, 2); origin.z() + iz * h < -0.003; ++iz) {
+        const Vec3 p = origin + h * Vec3(ix, iy, iz);
+        // (The own slice's distance bounds the exact one above; 6 voxels
+        // away no slice within 3 voxels comes within 1.5.)
+        if (std::fabs(below_v_distance(p.y(), p.z(), g.tip(p.x()))) >= 6 * h) continue;
+        const double e = g.exact(p, h);
+        if (std::fabs(e) >= 1.5 * h) continue;
+        const double err = std::fabs(stock.sample(p) - e) / h;
+        if (e > 0) {
+          ++c.air;
+          c.air_worst = std::max(c.air_worst, err);
+          c.air_off += err > 0.04;
+        } else {
+          ++c.material;
+          c.material_worst = std::max(c.material_worst, err);
+          c.material_off += err > 0.25;
+        }
+      }
+  return c;
+}
+
 TEST(Volume, VToolStepsMatchTheExactDistanceBesideShortCrests) {
-  // One groove of a 90 deg V planing along X over steps: flat runs joined
-  // by single moves that rise or fall 3 um. Each rise ends in a crest run
-  // of one move, 3.5 um, shorter than the two half widths (4 um at 1 um
-  // voxels) that drawing the next prism back over the crest took: the
-  // crest's joint was then closed by a JointPrim, the intersection of the
-  // prisms, which is a valley's shape: beside those crests the voxels
-  // read up to a voxel too little depth (the snowflake's rises, moves of
-  // 1.988 um at 0.5 um voxels, met the same). Every voxel whose exact
-  // distance is within 1.5 voxels (all that the volumes and the mesher
-  // read) must match it.
+  // One groove of a 90 deg V planing along X over steps. Each rise ends
+  // in a crest run of one move, 3.5 um, shorter than the two half widths
+  // (4 um at 1 um voxels) that drawing the next prism back over the
+  // crest takes: the crest's joint was then closed by a JointPrim, the
+  // intersection of the prisms, which is a valley's shape, and beside
+  // those crests the voxels read up to half a voxel too little depth (the
+  // snowflake's rises, moves of 1.988 um at 0.5 um voxels, met the same).
+  // Every voxel whose exact distance is within 1.5 voxels (all that the
+  // volumes and the mesher read) must match it: in the cut to 4 % of a
+  // voxel (a crest piece's depth is its nearer flank plane's, short of
+  // the way to the crease itself: 0.031 voxels 1.5 voxels deep); in the
+  // material to a quarter (a sheared prism's distance outside is a
+  // first-order estimate beside its caps: measured 0.21 voxels where the
+  // rises and falls start).
   const double h = 0.001;
   const Aabb box{Vec3(-0.02, -0.03, -0.03), Vec3(0.16, 0.03, 0)};
   const tool::Tool t = tool::parse_tool_spec("vtool:angle=90,h=0.04,body=0.1", "test");
   const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  const VGroove g = stepped_groove();
   std::vector<sweep::Sweep> moves;
   sweep::Joiner join(stock::StockOptions{}.half_band_voxels * h, box);  // as the simulation joins them
-  const double step = 0.0035;
-  std::vector<double> xs{0.0}, zs{-0.012};
-  for (int k = 0; xs.size() < 41; ++k) {
-    // 5 flat moves, one rise, 5 flat, one fall: crests after the rises
-    // (run: the rise alone) and before the falls (run: the flat).
-    const int phase = k % 12;
-    const double dz = phase == 5 ? 0.003 : phase == 11 ? -0.003 : 0.0;
-    xs.push_back(xs.back() + step);
-    zs.push_back(zs.back() + dz);
-  }
-  for (std::size_t k = 0; k + 1 < xs.size(); ++k) {
-    moves.push_back(sweep::sweep_line(Vec3(xs[k], 0, zs[k]), Vec3(xs[k + 1], 0, zs[k + 1]), I, t));
+  for (std::size_t k = 0; k + 1 < g.xs.size(); ++k) {
+    moves.push_back(sweep::sweep_line(Vec3(g.xs[k], 0, g.zs[k]), Vec3(g.xs[k + 1], 0, g.zs[k + 1]), I, t));
     join(moves.back());
   }
   moves.push_back(join.finish());
@@ -863,59 +930,33 @@ TEST(Volume, VToolStepsMatchTheExactDistanceBesideShortCrests) {
   opt.voxel_mm = h;
   stock::Stock stock(box, box, opt);
   stock.subtract(moves);
+  const ExactCheck c = check_against_exact(stock, g, h);
+  EXPECT_GT(c.air, 3000);
+  EXPECT_GT(c.material, 4000);
+  EXPECT_EQ(c.air_off, 0) << "worst " << c.air_worst << " voxels";
+  EXPECT_EQ(c.material_off, 0) << "worst " << c.material_worst << " voxels";
+}
 
-  // The tip's height along X (the path), and the exact signed distance:
-  // the least over slices x' of the way to the material below that
-  // slice's V (sampled at h / 64 along X; the slices' distance is smooth).
-  auto tip = [&](double x) {
-    for (std::size_t k = 0; k + 1 < xs.size(); ++k)
-      if (x <= xs[k + 1]) return zs[k] + (zs[k + 1] - zs[k]) * (x - xs[k]) / (xs[k + 1] - xs[k]);
-    return zs.back();
-  };
-  auto exact = [&](const Vec3& p) {
-    const double inside = below_v_distance(p.y(), p.z(), tip(p.x())) > 0 ? 1.0 : -1.0;
-    double best = std::numeric_limits<double>::infinity();
-    for (int i = -3 * 64; i <= 3 * 64; ++i) {
-      const double dx = i * h / 64, x = p.x() + dx;
-      const double d = below_v_distance(p.y(), p.z(), tip(x));
-      // Air (inside): the way to the material of some slice; material:
-      // the way to the air of some slice.
-      const double way = inside > 0 ? (d > 0 ? d : 0.0) : (d < 0 ? -d : 0.0);
-      best = std::min(best, std::hypot(dx, way));
-    }
-    return inside * best;
-  };
-  // The voxels between the groove's ends, below the top by 3 voxels (the
-  // top face is another surface) and within 1.5 voxels of the groove's:
-  // in the cut, to 2 % of a voxel; in the material, to a quarter (a
-  // sheared prism's distance outside is a first-order estimate beside
-  // its caps: measured 0.21 voxels where the rises and falls start).
-  const Vec3 origin = (box.center() / h).array().round().matrix() * h;
-  int air = 0, material = 0, air_off = 0, material_off = 0;
-  double air_worst = 0, material_worst = 0;
-  for (int ix = static_cast<int>(std::ceil((0.004 - origin.x()) / h)); origin.x() + ix * h < xs.back() - 0.004; ++ix)
-    for (int iy = static_cast<int>(std::ceil((-0.02 - origin.y()) / h)); origin.y() + iy * h < 0.02; ++iy)
-      for (int iz = static_cast<int>(std::ceil((-0.025 - origin.z()) / h)); origin.z() + iz * h < -0.003; ++iz) {
-        const Vec3 p = origin + h * Vec3(ix, iy, iz);
-        const double v = stock.sample(p);
-        if (std::fabs(v) >= 2 * h) continue;  // (clamped: the exact value is beyond 1.5 voxels, or v is far off)
-        const double e = exact(p);
-        if (std::fabs(e) >= 1.5 * h) continue;
-        const double err = std::fabs(v - e) / h;
-        if (e > 0) {
-          ++air;
-          air_worst = std::max(air_worst, err);
-          air_off += err > 0.02;
-        } else {
-          ++material;
-          material_worst = std::max(material_worst, err);
-          material_off += err > 0.25;
-        }
-      }
-  EXPECT_GT(air, 4000);
-  EXPECT_GT(material, 4000);
-  EXPECT_EQ(air_off, 0) << "worst " << air_worst << " voxels";
-  EXPECT_EQ(material_off, 0) << "worst " << material_worst << " voxels";
+TEST(Volume, VToolStepsProgramMatchesTheExactDistance) {
+  // The same groove as a program through the whole simulation (its
+  // Joiner at the stock's band and reach, the contact check's batches):
+  // the same figures.
+  TempDir dir;
+  const double h = 0.001;
+  const VGroove g = stepped_groove();
+  std::string prog = "G21 G90 G94\nG0 X0 Y0 Z0.02\nG1 Z-0.012 F30\n";
+  for (std::size_t k = 1; k < g.xs.size(); ++k)
+    prog += "G1 X" + std::to_string(g.xs[k]) + " Z" + std::to_string(g.zs[k]) + "\n";
+  prog += "G0 Z0.02\nM30\n";
+  auto r = run_program(dir, prog, "vtool:angle=90,h=0.04,body=0.1",
+                       Aabb{Vec3(-0.02, -0.03, -0.03), Vec3(0.16, 0.03, 0)}, h);
+  ASSERT_TRUE(r.stock);
+  EXPECT_EQ(r.stock->voxel_mm(), h);
+  const ExactCheck c = check_against_exact(*r.stock, g, h);
+  EXPECT_GT(c.air, 3000);
+  EXPECT_GT(c.material, 4000);
+  EXPECT_EQ(c.air_off, 0) << "worst " << c.air_worst << " voxels";
+  EXPECT_EQ(c.material_off, 0) << "worst " << c.material_worst << " voxels";
 }
 
 }  // namespace
