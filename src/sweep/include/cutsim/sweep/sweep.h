@@ -551,6 +551,8 @@ Vec3 hull_offset(const Vec3& p, const HullPrim& h);
   if (g >= lim) return g;
   if (jp.crest) {
     // The union: the larger depth of the two, where either is below g.
+    // (mid keeps its start cap though the slab starts no earlier: without
+    // it, outside the piece came nearer than the prisms' union.)
     const double a = joint_part(jp, jp.mid, w, true, false);
     if (a <= g) return g;
     return std::max(g, std::min(a, joint_part(jp, jp.after, w, false, true)));
