@@ -783,6 +783,137 @@ TEST(Interference, StopAtFirstContactEndsTheRunThere) {
   EXPECT_EQ(r.last_line_cut, 2);
 }
 
+// A pointed V tool's planing run clears a pose only where every point of
+// the clearance body deeper than the tolerance lies in the groove the run
+// cut (the wedge along the path, up to the edge's height) or above the
+// stock's top: checked on random paths at points sampled in the body.
+// And it does clear the level and gently falling paths, not the steep ones.
+TEST(Interference, PlaningRunClearsOnlyBodiesInsideItsGroove) {
+  const tool::Tool vt = tool::parse_tool_spec("vtool:angle=90,clearance=7,h=0.1,body=0.3", "test");
+  const std::vector<tool::Region> regions = tool::contact_regions(vt);
+  const auto& flank = std::get<tool::FlankBody>(regions.front().shape);
+  const tool::FlankTrig trig = tool::flank_trig(flank);
+  const double top = 0, tol = 0.000125, y0 = 0.01;
+  const double k = std::tan(7 * kPi / 180) / std::sin(kPi / 4);
+  // A run of tips along +X at y0, and a pose on its next move.
+  auto view_of = [&](const std::vector<Vec3>& tips) {
+    return sim::PlaningRun::View{std::make_shared<const std::vector<Vec3>>(tips), tips.size(), Eigen::Matrix3d::Identity()};
+  };
+  auto at = [](const Vec3& tip) {
+    Pose p = Pose::Identity();
+    p.translation() = tip;
+    return p;
+  };
+  // The path's height at x (tips and then the pose), and whether q lies in
+  // the groove.
+  auto in_groove = [&](const std::vector<Vec3>& path, const Vec3& q) {
+    if (q.x() < path.front().x() || q.x() > path.back().x()) return false;
+    std::size_t i = 1;
+    while (path[i].x() < q.x()) ++i;
+    const Vec3 &a = path[i - 1], &b = path[i];
+    const double c = b.x() > a.x() ? a.z() + (b.z() - a.z()) * (q.x() - a.x()) / (b.x() - a.x()) : b.z();
+    const double u = q.z() - c;
+    return u >= std::fabs(q.y() - y0) && u <= flank.edge.height;
+  };
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> uni(0, 1);
+  int cleared = 0, checked = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    // Steps of 1-20 um, slopes up to +-0.3 (the clearance line's is 0.174).
+    std::vector<Vec3> path{Vec3(0, y0, -0.02 * uni(rng))};
+    const int n = 5 + static_cast<int>(uni(rng) * 200);
+    const double bias = 0.3 * (2 * uni(rng) - 1);
+    for (int i = 0; i < n; ++i) {
+      const double dx = 0.001 + 0.019 * uni(rng);
+      const double slope = std::clamp(bias + 0.1 * (2 * uni(rng) - 1), -0.3, 0.3);
+      path.push_back(path.back() + Vec3(dx, 0, slope * dx));
+      path.back().z() = std::min(path.back().z(), -0.001);
+    }
+    const Vec3 pose = path.back();
+    path.pop_back();
+    const auto v = view_of(path);
+    path.push_back(pose);  // (the pose's own move cut up to it too)
+    if (!sim::PlaningRun::flank_clear(v, flank, at(pose), top, tol)) continue;
+    ++cleared;
+    const Aabb b = tool::shape_bounds(flank);
+    for (int s = 0; s < 4000; ++s) {
+      const Vec3 l(b.min.x() + uni(rng) * b.size().x(), b.min.y() + uni(rng) * b.size().y(),
+                   b.min.z() + uni(rng) * std::min(b.size().z(), top - pose.z() + 0.001));
+      if (tool::flank_distance(flank, trig, l) >= -tol) continue;
+      const Vec3 q = pose + l;
+      ++checked;
+      ASSERT_TRUE(q.z() > top || in_groove(path, q)) << "trial " << trial << " point " << q.transpose();
+    }
+  }
+  EXPECT_GT(cleared, 40);
+  EXPECT_GT(checked, 20000);
+  // Level, falling at 0.15 (under the clearance line's 0.174) and at 0.2
+  // (over it), 0.5 mm of 2 um steps ending 30 um deep.
+  auto ends_cleared = [&](double fall) {
+    std::vector<Vec3> path;
+    for (int i = 0; i <= 250; ++i) path.emplace_back(0.002 * i, y0, -0.03 + fall * (0.5 - 0.002 * i));
+    const Vec3 pose = path.back() + Vec3(0.002, 0, -fall * 0.002);
+    return sim::PlaningRun::flank_clear(view_of(path), flank, at(pose), top, tol);
+  };
+  EXPECT_TRUE(ends_cleared(0));
+  EXPECT_TRUE(ends_cleared(0.15));
+  EXPECT_FALSE(ends_cleared(0.2));
+  EXPECT_GT(k, 0.17);
+  EXPECT_LT(k, 0.18);
+  // A run shorter than the body reaches below the top: not cleared.
+  std::vector<Vec3> short_run{Vec3(0, y0, -0.03), Vec3(0.05, y0, -0.03)};
+  EXPECT_FALSE(sim::PlaningRun::flank_clear(view_of(short_run), flank, at(Vec3(0.06, y0, -0.03)), top, tol));
+  // Off the run's plane, or with no tolerance: not cleared.
+  std::vector<Vec3> level{Vec3(0, y0, -0.01), Vec3(0.3, y0, -0.01)};
+  EXPECT_TRUE(sim::PlaningRun::flank_clear(view_of(level), flank, at(Vec3(0.31, y0, -0.01)), top, tol));
+  EXPECT_FALSE(sim::PlaningRun::flank_clear(view_of(level), flank, at(Vec3(0.31, y0 + 1e-6, -0.01)), top, tol));
+  EXPECT_FALSE(sim::PlaningRun::flank_clear(view_of(level), flank, at(Vec3(0.31, y0, -0.01)), top, 0));
+}
+
+// Poses a planing run clears are not scanned: the contacts (lines, depths,
+// points, poses) and the cut are those of scanning every pose, on V-tool
+// lines that plunge into the stock (rubbing as they fall) and then follow
+// a wave.
+TEST(Interference, PlaningRunsGiveTheContactsOfScanningEveryPose) {
+  TempDir dir;
+  std::ostringstream os;
+  os << std::fixed;
+  os.precision(6);
+  for (double y : {-0.008, 0.0, 0.008}) {
+    os << "G0 X-0.03 Y" << y << " Z0.01\nG1 Z0 F30\n";
+    for (double x = -0.028; x <= 0.19; x += 0.002) {
+      const double z = x < 0 ? -0.008 * (x + 0.03) / 0.03 : -0.008 - 0.004 * std::sin(2 * kPi * x / 0.1);
+      os << "G1 X" << x << " Z" << z << "\n";
+    }
+    os << "G0 Z0.01\n";
+  }
+  os << "M30\n";
+  sim::SimOptions o;
+  o.program = dir.write("prog.nc", os.str());
+  o.tool = tool::parse_tool_spec("vtool:angle=90,clearance=7,h=0.1,body=0.3");
+  o.stock_box = Aabb{Vec3(-0.02, -0.03, -0.05), Vec3(0.2, 0.03, 0)};
+  o.voxel_mm = 0.001;
+  const auto runs = sim::simulate(o);
+  o.planing_runs = false;
+  const auto every = sim::simulate(o);
+  EXPECT_EQ(every.poses_cleared_by_runs, 0);
+  EXPECT_EQ(runs.contact_poses, every.contact_poses);
+  // Of the lines' 333 feed poses (one per 2 um move; the rapids have the
+  // rest), those on the wave's rises and gentle falls.
+  EXPECT_GT(runs.poses_cleared_by_runs, 150);
+  ASSERT_FALSE(every.contacts.empty());
+  ASSERT_EQ(runs.contacts.size(), every.contacts.size());
+  for (std::size_t i = 0; i < every.contacts.size(); ++i) {
+    const auto &a = runs.contacts[i], &b = every.contacts[i];
+    EXPECT_EQ(a.line, b.line);
+    EXPECT_EQ(a.region, b.region);
+    EXPECT_EQ(a.depth_mm, b.depth_mm);
+    EXPECT_EQ(a.where, b.where);
+    EXPECT_EQ(a.poses, b.poses);
+  }
+  EXPECT_EQ(runs.stock->removed_volume_mm3(), every.stock->removed_volume_mm3());
+}
+
 TEST(ToolSpec, EveryKindParsesWithItsDefaults) {
   const auto v = tool::parse_tool_spec("vtool:angle=90,clearance=7");
   EXPECT_EQ(v.kind, tool::ToolKind::vtool);

@@ -26,9 +26,93 @@ double InterferenceChecker::pose_spacing(const tool::Tool& t, double voxel_mm) {
   return std::max(s, 2 * voxel_mm);
 }
 
+namespace {
+// A tool whose flank body PlaningRun can clear: a pointed edge (its
+// wedge shrunk is the wedge raised), a rake face leaning back or upright
+// (the body stays behind the edge's plane).
+bool plans_runs(const tool::Tool& t) {
+  if (t.kind != tool::ToolKind::vtool && t.kind != tool::ToolKind::nose) return false;
+  return t.corner_radius_mm == 0 && t.rake_angle_deg >= 0 && t.clearance_angle_deg >= 0 &&
+         t.included_angle_deg > 0 && t.included_angle_deg < 180;
+}
+// The rotation of a run: the tool axis +Z exactly (the stock's top is a
+// height along it).
+bool upright(const Eigen::Matrix3d& r) {
+  return r(0, 2) == 0 && r(1, 2) == 0 && r(2, 2) == 1 && r(2, 0) == 0 && r(2, 1) == 0;
+}
+constexpr double kRunGap = 1e-9;  // mm: a move's start off its run's last tip, or off its plane
+}  // namespace
+
+PlaningRun::View PlaningRun::next(const motion::Move& m, const PlannedMove& pm, const tool::Tool& t,
+                                  const Planner& planner) {
+  const bool fits = m.kind != motion::MotionKind::rapid && m.is_straight() && plans_runs(t);
+  if (!fits) {
+    tips_.reset();
+    return {};
+  }
+  const Pose p0 = planner.pose_at(m, pm, 0.0), p1 = planner.pose_at(m, pm, 1.0);
+  const Eigen::Matrix3d& r = p0.linear();
+  const double o = deg_to_rad(t.orientation_deg);
+  const Vec3 along = r * Vec3(std::cos(o), std::sin(o), 0), across = r * Vec3(-std::sin(o), std::cos(o), 0);
+  const Vec3 a = p0.translation(), b = p1.translation();
+  if (!upright(r) || p1.linear() != r || (b - a).dot(along) <= 0 || std::fabs((b - a).dot(across)) > kRunGap) {
+    tips_.reset();
+    return {};
+  }
+  const bool continues = tips_ && tool_ == &t && rotation_ == r && (a - tips_->back()).norm() <= kRunGap &&
+                         std::fabs((b - tips_->front()).dot(across)) <= kRunGap;
+  if (!continues) {
+    tips_ = std::make_shared<std::vector<Vec3>>(1, a);
+    rotation_ = r;
+    tool_ = &t;
+  }
+  View v{tips_, tips_->size(), rotation_};
+  tips_->push_back(b);
+  return v;
+}
+
+bool PlaningRun::flank_clear(const View& v, const tool::FlankBody& f, const Pose& at, double top, double tol) {
+  // A voxel deeper than tol in the body lies in its flank term's region:
+  // the wedge's distance d in the rake plane, at t behind the edge, has
+  // d cos(clearance) + t sin(clearance) < -tol, so the wedge eroded by
+  // t tan(clearance) + tol / cos(clearance): the wedge raised by that over
+  // sin(half angle) (pointed). At t behind the pose the run's groove is the
+  // wedge with its tip on the path: the voxel lies in it, by tol / cos(
+  // clearance) at least (across its faces), where the path there is no
+  // higher than k t above the pose. Upwards the body ends below the pose's
+  // tip plus the edge's height, the groove at the path's plus it: above
+  // that, the stock's top must be. Behind T, where the raised wedge clears
+  // the top, or the body's end, nothing of it is below the top.
+  if (!v.tips || v.count == 0 || tol <= 0 || !(at.linear() == v.rotation)) return false;
+  const tool::EdgeProfile& e = f.edge;
+  if (e.nose_radius != 0 || f.rake < 0 || f.clearance < 0) return false;
+  const Vec3 along = v.rotation * Vec3(e.cos_o, e.sin_o, 0), across = v.rotation * Vec3(-e.sin_o, e.cos_o, 0);
+  const std::vector<Vec3>& tips = *v.tips;
+  const Vec3 p = at.translation();
+  if ((p - tips[v.count - 1]).dot(along) < 0 || std::fabs((p - tips.front()).dot(across)) > kRunGap) return false;
+  const double k = std::tan(f.clearance) / std::sin(e.half_angle);
+  const double cp = p.z();
+  if (cp >= top) return true;  // the body lies above the tip
+  if (cp + e.height < top) return false;
+  const double reach = k > 0 ? std::min(f.length, (top - cp) / k) : f.length;
+  double t0 = 0, z0 = 0;  // the last point checked: the pose
+  for (std::size_t i = v.count; i-- > 0;) {
+    const double t = (p - tips[i]).dot(along), z = tips[i].z() - cp;
+    if (t >= reach) {
+      const double zr = t > t0 ? z0 + (z - z0) * (reach - t0) / (t - t0) : z;
+      return zr <= k * reach && cp + zr + e.height >= top;
+    }
+    if (z > k * t || tips[i].z() + e.height < top) return false;
+    t0 = t;
+    z0 = z;
+  }
+  return false;  // the run starts nearer than the body reaches below the top
+}
+
 void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
                                const std::function<void()>& on_pose,
-                               const std::function<void(const std::string& region, int pose, Scan scan)>& on_scan) const {
+                               const std::function<void(const std::string& region, int pose, Scan scan)>& on_scan,
+                               const PlaningRun::View* run) const {
   const bool rapid = m.kind == motion::MotionKind::rapid;
   std::vector<tool::Region> regions = tool::contact_regions(tool);
   const tool::Shape cut = tool::cutting_shape(tool);
@@ -68,7 +152,8 @@ void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, con
     const double s_prev = static_cast<double>(k - 1) / n;
     const Pose pose = planner_.pose_at(m, pm, s);
     on_pose();
-    // Skip poses whose regions all miss the material's reach.
+    // Skip poses whose regions all miss the material's reach, or that a
+    // planing run clears.
     bool any = false;
     std::vector<Aabb> boxes;
     std::vector<Pose> at(regions.size());  // each region's frame in the workpiece
@@ -77,6 +162,12 @@ void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, con
       const tool::Region& rg = regions[i];
       at[i] = pose * rg.frame;
       const Pose before = prev * rg.frame;
+      if (const auto* flank = std::get_if<tool::FlankBody>(&rg.shape);
+          flank && run && !rapid && PlaningRun::flank_clear(*run, *flank, at[i], stock_.box().max.z(), tol_)) {
+        if (regions.size() == 1) cleared_.fetch_add(1, std::memory_order_relaxed);
+        boxes.push_back(Aabb());
+        continue;
+      }
       // Only the part of a V tool's body below the top of the material counts.
       Aabb b = sweep::world_box_within(rg.shape, at[i].linear(), at[i].translation(), reach);
       if (swept(rg.shape)) {
@@ -102,7 +193,7 @@ void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, con
     const bool so_far_lipschitz =
         std::all_of(so_far->prims.begin(), so_far->prims.end(), [](const auto& p) { return sweep::lipschitz(p); });
     for (std::size_t i = 0; i < regions.size(); ++i) {
-      if (!boxes[i].overlaps(reach)) continue;
+      if (boxes[i].empty() || !boxes[i].overlaps(reach)) continue;
       // The scan owns what it needs: it may run after this walk.
       on_scan(regions[i].name, k, [this, so_far, so_far_lipschitz, box = boxes[i], at = at[i], shape = regions[i].shape,
                                    sw = std::move(sweeps[i])]() {
@@ -136,18 +227,22 @@ void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, con
 }
 
 InterferenceChecker::FirstScans InterferenceChecker::first_scans(const motion::Move& m, const PlannedMove& pm,
-                                                                const tool::Tool& tool) const {
+                                                                const tool::Tool& tool,
+                                                                const PlaningRun::View* run) const {
   FirstScans out;
-  walk(m, pm, tool, [&] { ++out.poses; }, [&](const std::string& region, int pose, Scan scan) {
-    FirstScans::Job job{pose, region, std::move(scan), {}};
-    job.found = job.scan();
-    out.jobs.push_back(std::move(job));
-  });
+  walk(
+      m, pm, tool, [&] { ++out.poses; },
+      [&](const std::string& region, int pose, Scan scan) {
+        FirstScans::Job job{pose, region, std::move(scan), {}};
+        job.found = job.scan();
+        out.jobs.push_back(std::move(job));
+      },
+      run);
   return out;
 }
 
 bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
-                                const PendingCuts* pending, const FirstScans* first) {
+                                const PendingCuts* pending, const FirstScans* first, const PlaningRun::View* run) {
   const bool rapid = m.kind == motion::MotionKind::rapid;
   bool touched = false;
   bool current = first && first->current;  // (until this check subtracts the pending cuts)
@@ -198,8 +293,9 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     }
     pose_index_ = base + first->poses;
   } else {
-    walk(m, pm, tool, [&] { ++pose_index_; },
-         [&](const std::string& region, int, const Scan& scan) { take(region, nullptr, scan); });
+    walk(
+        m, pm, tool, [&] { ++pose_index_; },
+        [&](const std::string& region, int, const Scan& scan) { take(region, nullptr, scan); }, run);
   }
   return touched;
 }

@@ -115,6 +115,8 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
                   {"deepest_mm", d.depth_mm}, {"deepest_at_least", d.at_least}});
   }
   j["contact_summary"] = ks;
+  j["contact_poses"] = r.contact_poses;
+  j["contact_poses_cleared_by_runs"] = r.poses_cleared_by_runs;
   j["active_voxels"] = st.active_voxels;
   j["voxel_evaluations"] = st.voxel_evaluations;
   if (st.band_voxels) j["band_voxels"] = st.band_voxels;

@@ -476,8 +476,16 @@ SimResult simulate(const SimOptions& opt) {
   const std::size_t group_size = stop_at_contact ? 1 : std::max<std::size_t>(1, opt.check_group);
   std::vector<QueuedMove> group;
   std::vector<InterferenceChecker::FirstScans> firsts;
+  PlaningRun runs;
+  std::vector<PlaningRun::View> run_views;
   auto check_group = [&] {
     if (group.empty()) return;
+    // Each move's planing run as it starts, in order (before the scans
+    // side by side, which only read them).
+    run_views.assign(group.size(), {});
+    if (opt.planing_runs)
+      for (std::size_t j = 0; j < group.size(); ++j)
+        run_views[j] = runs.next(group[j].m, group[j].pm, *group[j].tool, planner);
     // The moves' sweeps side by side too (joined in order below).
     const auto t0 = Clock::now();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, group.size(), 1), [&](const auto& r) {
@@ -489,7 +497,7 @@ SimResult simulate(const SimOptions& opt) {
     if (group.size() > 1) {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, group.size(), 1), [&](const auto& r) {
         for (std::size_t j = r.begin(); j != r.end(); ++j)
-          firsts[j] = checker.first_scans(group[j].m, group[j].pm, *group[j].tool);
+          firsts[j] = checker.first_scans(group[j].m, group[j].pm, *group[j].tool, &run_views[j]);
       });
     }
     res.timing.contact_check_s += seconds_since(t1);
@@ -500,7 +508,8 @@ SimResult simulate(const SimOptions& opt) {
       const auto t2 = Clock::now();
       flush_s = 0;
       firsts[j].current = stock_changes == subtractions;
-      const bool touched = checker.check(m, group[j].pm, *group[j].tool, &held, group.size() > 1 ? &firsts[j] : nullptr);
+      const bool touched =
+          checker.check(m, group[j].pm, *group[j].tool, &held, group.size() > 1 ? &firsts[j] : nullptr, &run_views[j]);
       res.timing.contact_check_s += seconds_since(t2) - flush_s;
       sweep::Sweep& sw = group[j].sw;
       if (!sw.prims.empty() && sw.bounds.overlaps(res.stock->roi().expanded(res.stock->band_mm() + res.voxel_mm))) {
@@ -545,6 +554,8 @@ SimResult simulate(const SimOptions& opt) {
   }
   if (res.stock) res.stock->release_scratch();
   res.contacts = checker.contacts();
+  res.contact_poses = checker.poses();
+  res.poses_cleared_by_runs = checker.poses_cleared();
   res.max_laser_error_mm = planner.max_laser_error_mm();
   if (opt.job.profile) res.profile = measure_profile(*res.stock, res.stock_box, *opt.job.profile);
   res.timing.simulate_s = seconds_since(t_sim);

@@ -1,7 +1,9 @@
 #pragma once
 // Contacts of the parts of a tool that must not touch the material:
 // clearance faces, neck, shank, holder, and on a rapid the whole tool.
+#include <atomic>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -34,6 +36,42 @@ struct Contact {
 /// as found when they would leave its deepest voxel as it is (they only
 /// take material away, so nowhere else can get deeper than it); else they
 /// are subtracted and the pose is tested again.
+/// A pointed V tool planing: consecutive straight cuts at one orientation,
+/// each forward along the cutting direction, all in one plane through the
+/// tool axis (the snowflake's scan lines). Behind its edge the clearance
+/// body is the edge's wedge shrunk by tan(clearance) per unit length back,
+/// so at t behind the pose it is the wedge raised by t tan(clearance) /
+/// sin(half angle). Where the path behind never rises above that line, the
+/// body less any depth lies inside the groove the run has cut (the same
+/// wedge along the path) or above the stock's top: after the run's cuts
+/// nothing of the material is in it. The contact check then need not scan
+/// that pose, nor subtract the cuts it holds back to find that out.
+class PlaningRun {
+public:
+  /// The run as a move starts.
+  struct View {
+    std::shared_ptr<const std::vector<Vec3>> tips;  ///< the run's tips in order, workpiece frame
+    std::size_t count = 0;                          ///< of them, those up to the move's start
+    Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();  ///< the tool frame's, the run's
+  };
+  /// The run as move `m` (the next in the program) starts; m joins it from
+  /// then on where it continues it, else starts a new one (or none: a rapid,
+  /// an arc, a rotary move, another tool, a plunge, a sideways move).
+  View next(const motion::Move& m, const PlannedMove& pm, const tool::Tool& t, const Planner& planner);
+  /// True where the flank body `f` at `at` (a pose of the move whose view
+  /// this is, its own cut from its start to there included in what removed
+  /// the material), less `tol` (> 0) all round, lies in the groove the run
+  /// cut or above `top` (the stock's top), the tool axis being +Z: then no
+  /// voxel is deeper than `tol` in both the body and the material the
+  /// run's cuts leave. False where unsure.
+  static bool flank_clear(const View& v, const tool::FlankBody& f, const Pose& at, double top, double tol);
+
+private:
+  std::shared_ptr<std::vector<Vec3>> tips_;
+  Eigen::Matrix3d rotation_ = Eigen::Matrix3d::Identity();
+  const tool::Tool* tool_ = nullptr;
+};
+
 class InterferenceChecker {
 public:
   /// Cuts the caller holds back from the stock.
@@ -63,12 +101,20 @@ public:
     /// that found no touch (the stock has only lost material since).
     bool current = false;
   };
-  FirstScans first_scans(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool) const;
+  /// With `run` (the move's planing run), poses whose flank body the run
+  /// clears (PlaningRun::flank_clear) are not scanned.
+  FirstScans first_scans(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
+                         const PlaningRun::View* run = nullptr) const;
   /// Returns true when this move touched. With `first` (first_scans of
-  /// this move), the scans that stand are not made again.
+  /// this move, with the same `run`), the scans that stand are not made
+  /// again.
   bool check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
-             const PendingCuts* pending = nullptr, const FirstScans* first = nullptr);
+             const PendingCuts* pending = nullptr, const FirstScans* first = nullptr,
+             const PlaningRun::View* run = nullptr);
   const std::vector<Contact>& contacts() const { return contacts_; }
+  /// Poses checked so far, and of them those a planing run cleared.
+  long poses() const { return pose_index_; }
+  long poses_cleared() const { return cleared_.load(); }
   /// Poses between tested ones along a move, mm (half the smallest region).
   static double pose_spacing(const tool::Tool& t, double voxel_mm);
 
@@ -78,12 +124,14 @@ private:
   /// brings near the material, with the scan of that region at that pose
   /// (against the stock less what the move cut before it).
   void walk(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool, const std::function<void()>& on_pose,
-            const std::function<void(const std::string& region, int pose, Scan scan)>& on_scan) const;
+            const std::function<void(const std::string& region, int pose, Scan scan)>& on_scan,
+            const PlaningRun::View* run) const;
 
   const stock::Stock& stock_;
   const Planner& planner_;
   double tol_, sweep_tol_;
   long pose_index_ = 0;
+  mutable std::atomic<long> cleared_{0};  // (walks of one group run side by side)
   std::vector<Contact> contacts_;
 };
 

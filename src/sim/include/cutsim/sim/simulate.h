@@ -51,6 +51,10 @@ struct SimOptions {
   /// Moves whose contact scans run side by side before they are checked
   /// in order (the results do not depend on it; 1: one move at a time).
   std::size_t check_group = 8;
+  /// Poses of a pointed V tool's planing runs whose clearance body the
+  /// run's groove clears are not scanned (sim::PlaningRun; the results do
+  /// not depend on it: false scans them, for the tests that compare).
+  bool planing_runs = true;
   /// Bounds of the target, when there is one: a target that misses the
   /// stock is refused before any grid is built.
   std::optional<Aabb> target_bounds;
@@ -115,6 +119,8 @@ struct SimResult {
   std::vector<tool::Tool> tools_used;           ///< in order of first use
   std::vector<Contact> contacts;                ///< non-cutting regions in the material
   double contact_tolerance_mm = 0;              ///< contacts shallower than this are not recorded
+  long contact_poses = 0;                       ///< poses the contact check walked
+  long poses_cleared_by_runs = 0;               ///< of them, those a planing run cleared (not scanned)
   bool stopped_at_contact = false;              ///< stop_at_first_contact ended the run
   std::optional<Profile> profile;               ///< [report] profile
 };
