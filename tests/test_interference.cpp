@@ -300,8 +300,8 @@ TEST(Interference, OverlapPassingOverQuartersTheMoveRemovedIsTheSame) {
     const Aabb bounds = flank.bounds();
     const stock::Overlap none = s.overlap(bounds, region, nullptr, 0.0, plane);
     const stock::Overlap a = s.overlap(bounds, region, removed, 0.0, plane);
-    const stock::Overlap b = s.overlap(bounds, region, removed, 0.0, plane, true);
-    const stock::Overlap c = s.overlap(bounds, region, removed, 0.0, nullptr, true);
+    const stock::Overlap b = s.overlap(bounds, region, removed, 0.0, plane, removed);
+    const stock::Overlap c = s.overlap(bounds, region, removed, 0.0, nullptr, removed);
     EXPECT_EQ(a.depth_mm, b.depth_mm) << "pose " << i;
     EXPECT_EQ(a.where, b.where) << "pose " << i;
     EXPECT_EQ(a.stock_value, b.stock_value) << "pose " << i;
@@ -451,6 +451,64 @@ TEST(Interference, MovesScannedSideBySideGiveTheContactsOfOneAtATime) {
       EXPECT_EQ(a.poses, b.poses);
     }
     EXPECT_EQ(one.stock->removed_volume_mm3(), grouped.stock->removed_volume_mm3());
+  }
+}
+
+// Cuts held back in a batch: where a pose's touch lies in material they
+// take, the pose is tested again on the stock less the latest of them
+// weighed voxel by voxel, and the older ones are subtracted only where
+// they would change what that finds. The contacts must be those of
+// subtracting every move before the next is checked: a V tool's raster
+// whose passes overlap (the pitch is a third of the groove), each falling
+// at 13 degrees against its 7 degree clearance (its flank rubs) and
+// rising again; all held cuts weighed, the latest 3, and one at a time.
+TEST(Interference, ContactsOnTheStockLessTheHeldCutsAreThoseOfMoveByMove) {
+  TempDir dir;
+  std::ostringstream prog;
+  prog << std::fixed;
+  prog.precision(6);
+  const double fall = std::tan(13 * kPi / 180);
+  int moves = 0;
+  for (int pass = 0; pass < 6; ++pass) {
+    const double y = -0.05 + 0.02 * pass;
+    prog << "G0 X-0.16 Y" << y << " Z0.02\nG1 Z-0.01 F100\n";
+    for (int i = -15; i <= 15; ++i, ++moves)
+      if (const double x = 0.01 * i; true) prog << "G1 X" << x << " Z" << -0.01 - fall * (0.15 - std::abs(x)) << "\n";
+    prog << "G0 Z0.02\n";
+  }
+  prog << "M30\n";
+  sim::SimOptions o;
+  o.program = dir.write("raster.nc", prog.str());
+  o.tool = tool::parse_tool_spec("vtool:angle=90,clearance=7,h=0.1,body=0.3");
+  o.stock_box = Aabb{Vec3(-0.2, -0.12, -0.1), Vec3(0.2, 0.12, 0)};
+  o.voxel_mm = 0.002;
+  o.hold_cuts = false;
+  const auto each = sim::simulate(o);
+  o.hold_cuts = true;
+  const auto held = sim::simulate(o);
+  o.latest_cuts = 3;
+  const auto latest = sim::simulate(o);
+  o.check_group = 1;
+  const auto alone = sim::simulate(o);
+  EXPECT_GT(moves, 150);
+  // Every move subtracted at once, and the batches: 8, 16, 32, ...
+  EXPECT_GT(each.stock->stats().grid_updates, held.stock->stats().grid_updates + 150);
+  ASSERT_GT(each.contacts.size(), 50u);
+  std::set<int> passes;
+  for (const auto& c : each.contacts) passes.insert(c.line / 34);
+  EXPECT_GE(passes.size(), 5u) << "every pass's flank rubs";
+  for (const auto* r : {&held, &latest, &alone}) {
+    ASSERT_EQ(r->contacts.size(), each.contacts.size());
+    for (std::size_t i = 0; i < each.contacts.size(); ++i) {
+      const auto &a = each.contacts[i], &b = r->contacts[i];
+      EXPECT_EQ(a.line, b.line) << i;
+      EXPECT_EQ(a.region, b.region) << i;
+      EXPECT_EQ(a.depth_mm, b.depth_mm) << "line " << a.line;
+      EXPECT_EQ(a.where, b.where) << "line " << a.line;
+      EXPECT_EQ(a.at_least, b.at_least) << "line " << a.line;
+      EXPECT_EQ(a.poses, b.poses) << "line " << a.line;
+    }
+    EXPECT_EQ(r->stock->removed_volume_mm3(), each.stock->removed_volume_mm3());
   }
 }
 

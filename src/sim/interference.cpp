@@ -6,6 +6,8 @@
 #include <limits>
 #include <vector>
 
+#include <tbb/enumerable_thread_specific.h>
+
 #include "cutsim/core/ranking.h"
 #include "cutsim/sweep/sweep.h"
 
@@ -196,68 +198,104 @@ void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, con
       if (boxes[i].empty() || !boxes[i].overlaps(reach)) continue;
       // The scan owns what it needs: it may run after this walk.
       on_scan(regions[i].name, k, [this, so_far, so_far_lipschitz, box = boxes[i], at = at[i], shape = regions[i].shape,
-                                   sw = std::move(sweeps[i])]() {
+                                   sw = std::move(sweeps[i])](const PendingCuts* pending) {
+        // The region's distance (a flank body's with its angles' sines
+        // worked out once for the pose).
+        const auto* flank = std::get_if<tool::FlankBody>(&shape);
+        const tool::FlankTrig trig = flank ? tool::flank_trig(*flank) : tool::FlankTrig{};
+        const Pose inv = at.inverse();
+        std::function<double(const Vec3&)> region;
+        if (!sw.prims.empty()) region = [&](const Vec3& x) { return sw.distance(x); };
+        else if (flank) region = [&](const Vec3& x) { return tool::flank_distance(*flank, trig, inv * x); };
+        else region = [&](const Vec3& x) { return tool::shape_distance(shape, inv * x); };
+        // What the move cut before this pose, and what the cuts held back
+        // would take (both only lower the material: the least of the two).
         using Removed = std::function<double(const Vec3&, double)>;
-        const Removed removed =
+        const Removal held = pending ? pending->removal(box, region) : Removal{};
+        const Removed own =
             so_far->prims.empty() ? Removed() : Removed([&](const Vec3& x, double) { return so_far->distance(x); });
-        const bool lip = removed && so_far_lipschitz;
-        if (!sw.prims.empty())
-          return stock_.overlap(box, [&](const Vec3& x) { return sw.distance(x); }, removed, tol_, nullptr, lip);
-        if (const auto* flank = std::get_if<tool::FlankBody>(&shape)) {
-          // Convex: its tangent plane bounds the scan's quarters (with its
-          // angles' sines worked out once for the pose).
-          const tool::FlankTrig trig = tool::flank_trig(*flank);
-          const Pose inv = at.inverse();
-          const Eigen::Matrix3d rot = at.linear();  // the body's gradient into the workpiece frame
-          return stock_.overlap(
-              box, [&](const Vec3& x) { return tool::flank_distance(*flank, trig, inv * x); }, removed, tol_,
-              [&](const Vec3& x, Vec3* g) {
-                Vec3 gl;
-                const double d = tool::flank_distance(*flank, trig, inv * x, &gl);
-                *g = rot * gl;
-                return d;
-              },
-              lip);
-        }
-        return stock_.overlap(box, [&, inv = at.inverse()](const Vec3& x) { return tool::shape_distance(shape, inv * x); },
-                              removed, tol_, nullptr, lip);
+        const Removed own_cone = so_far_lipschitz ? own : Removed();
+        auto least = [](const Removed& a, const Removed& b) -> Removed {
+          if (!a || !b) return a ? a : b;
+          return [&a, &b](const Vec3& x, double floor) {
+            const double u = a(x, floor);
+            return u <= floor ? u : std::min(u, b(x, floor));
+          };
+        };
+        const Removed removed = least(own, held.removed), cone = least(own_cone, held.cone);
+        if (!flank || !sw.prims.empty()) return stock_.overlap(box, region, removed, tol_, nullptr, cone);
+        // Convex: its tangent plane bounds the scan's quarters.
+        const Eigen::Matrix3d rot = at.linear();  // the body's gradient into the workpiece frame
+        return stock_.overlap(
+            box, region, removed, tol_,
+            [&](const Vec3& x, Vec3* g) {
+              Vec3 gl;
+              const double d = tool::flank_distance(*flank, trig, inv * x, &gl);
+              *g = rot * gl;
+              return d;
+            },
+            cone);
       });
     }
   }
 }
 
 InterferenceChecker::FirstScans InterferenceChecker::first_scans(const motion::Move& m, const PlannedMove& pm,
-                                                                const tool::Tool& tool,
+                                                                const tool::Tool& tool, const PendingCuts* pending,
                                                                 const PlaningRun::View* run) const {
   FirstScans out;
+  out.held_back = pending != nullptr;
   walk(
       m, pm, tool, [&] { ++out.poses; },
       [&](const std::string& region, int pose, Scan scan) {
         FirstScans::Job job{pose, region, std::move(scan), {}};
-        job.found = job.scan();
+        job.found = job.scan(nullptr);
+        if (pending && job.found.depth_mm > tol_ && pending->change(job.found.where, job.found.stock_value))
+          job.found = job.scan(pending);
         out.jobs.push_back(std::move(job));
       },
       run);
   return out;
 }
 
+InterferenceChecker::PendingCuts InterferenceChecker::pending_cuts(std::function<HeldCuts()> held,
+                                                                   const stock::Stock& stock, std::size_t n) {
+  PendingCuts p;
+  auto latest = [n](const HeldCuts& c) { return c.size() - std::min(c.size(), n); };
+  p.change = [held, &stock](const Vec3& x, double v) { return cuts_change_voxel(held(), stock, x, v); };
+  p.removal = [held, &stock, latest](const Aabb& box, const std::function<double(const Vec3&)>& region) {
+    const HeldCuts c = held();
+    return pending_removal(c.after(latest(c)), stock, box, region);
+  };
+  p.older_change = [held, &stock, latest](const Vec3& x, double v) {
+    const HeldCuts c = held();
+    return cuts_change_voxel(c.first(latest(c)), stock, x, v);
+  };
+  return p;
+}
+
 bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
                                 const PendingCuts* pending, const FirstScans* first, const PlaningRun::View* run) {
   const bool rapid = m.kind == motion::MotionKind::rapid;
   bool touched = false;
-  bool current = first && first->current;  // (until this check subtracts the pending cuts)
+  bool current = first && first->current;  // (until settle subtracts cuts)
   auto take = [&](const std::string& region, const stock::Overlap* found, const Scan& scan) {
     // A scan made earlier stands where the stock has not changed since,
     // and where it found no touch (the stock only loses material).
-    stock::Overlap ov = found && (current || found->depth_mm <= tol_) ? *found : scan();
+    const bool stands = found && (current || found->depth_mm <= tol_);
+    stock::Overlap ov = stands ? *found : scan(nullptr);
     // The batch's pending cuts only take material away: without a
     // contact on the stock as it is, there is none after them either, and
     // where they leave the deepest voxel as it is, that stays the deepest
-    // (and the first of its depth in the scan's order). Else they are
-    // subtracted and the pose tested again.
-    if (ov.depth_mm > tol_ && pending && pending->change(ov.where, ov.stock_value) && pending->flush()) {
+    // (and the first of its depth in the scan's order). Else the pose is
+    // tested again on the stock less them, still held back: subtracting
+    // them here (a batch of a few moves at each of the snowflake's 31k
+    // rubbing poses) doubled the voxels the update evaluated.
+    if (!(stands && first->held_back) && ov.depth_mm > tol_ && pending && pending->change(ov.where, ov.stock_value))
+      ov = scan(pending);
+    if (ov.depth_mm > tol_ && pending && pending->older_change(ov.where, ov.stock_value) && pending->flush()) {
       current = false;
-      ov = scan();
+      ov = scan(nullptr);
     }
     if (ov.depth_mm <= tol_) return;
     touched = true;
@@ -300,18 +338,133 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
   return touched;
 }
 
-bool cuts_change_voxel(const std::vector<sweep::Sweep>& cuts, const stock::Stock& stock, const Vec3& p, double v) {
+bool cuts_change_voxel(const HeldCuts& cuts, const stock::Stock& stock, const Vec3& p, double v) {
   // The update writes -d where d < -v, evaluating a piece at the voxels of
   // every leaf its box, grown by the band, reaches: a piece whose box,
   // grown by that and a leaf, misses the voxel is never asked there.
   const double reach = stock.band_mm() + 8 * stock.voxel_mm();
   const double below = -v + 1e-6 * stock.voxel_mm();  // rounding in the voxel's position
-  for (const sweep::Sweep& sw : cuts) {
+  for (std::size_t i = 0; i < cuts.size(); ++i) {
+    const sweep::Sweep& sw = cuts[i];
     if (!sw.bounds.expanded(reach).contains(p)) continue;
     for (const sweep::Primitive& piece : sw.prims)
       if (sweep::bounds(piece).expanded(reach).contains(p) && sweep::distance(piece, p) < below) return true;
   }
   return false;
+}
+
+namespace {
+
+// The pieces whose boxes (grown by `grow`, a joint's not) reach a voxel
+// centre, listed per leaf of the stock as its voxels are asked for, on
+// each thread (a scan asks for the voxels of one leaf after another; the
+// cuts near a region can number hundreds), with those boxes.
+class NearPieces {
+public:
+  struct Piece {
+    Aabb box;  // grown
+    const sweep::Primitive* prim;
+    bool inner;
+  };
+  NearPieces(const std::vector<const sweep::Primitive*>& pieces, const stock::Stock& stock, double grow)
+      : origin_(stock.roi_lattice_origin() - Vec3::Constant(0.5 * stock.voxel_mm())), h_(stock.voxel_mm()) {
+    for (const sweep::Primitive* p : pieces) {
+      const bool inner = sweep::interior_only(*p);
+      pieces_.push_back({sweep::bounds(*p).expanded(inner ? 0.0 : grow), p, inner});
+    }
+  }
+  const std::vector<Piece>& at(const Vec3& x) const {
+    // (The leaf's voxel centres lie h/2 .. 7.5 h into its cell.)
+    const Eigen::Vector3i c = ((x - origin_) / (8 * h_)).array().floor().cast<int>();
+    Cache& k = cache_.local();
+    if (k.valid && k.cell == c) return k.list;
+    k.valid = true;
+    k.cell = c;
+    const Vec3 lo = origin_ + 8 * h_ * c.cast<double>();
+    const Aabb cb{lo, lo + Vec3::Constant(8 * h_)};
+    k.list.clear();
+    for (const Piece& p : pieces_)
+      if (p.box.overlaps(cb)) k.list.push_back(p);
+    return k.list;
+  }
+
+private:
+  struct Cache {
+    bool valid = false;
+    Eigen::Vector3i cell;
+    std::vector<Piece> list;
+  };
+  std::vector<Piece> pieces_;
+  Vec3 origin_;
+  double h_;
+  mutable tbb::enumerable_thread_specific<Cache> cache_;
+};
+
+}  // namespace
+
+Removal pending_removal(const HeldCuts& cuts, const stock::Stock& stock, const Aabb& box,
+                        const std::function<double(const Vec3&)>& region) {
+  // The update gives a voxel of value v the nearest piece's distance d
+  // where -d > v (a joint's only where d < 0), stored as a float clamped to
+  // the band: a piece whose box, grown by the band (a joint's: not grown),
+  // misses the voxel leaves it as it is. The latest cuts first: the
+  // material a region meets just behind the edge is what they took. (The
+  // least of the distances does not depend on the order.)
+  const double g = stock.band_mm(), h = stock.voxel_mm();
+  std::vector<const sweep::Primitive*> near, joints, cone;
+  for (std::size_t i = cuts.size(); i-- > 0;) {
+    const sweep::Sweep* sw = &cuts[i];
+    if (!sw->bounds.expanded(g).overlaps(box)) continue;
+    for (auto piece = sw->prims.rbegin(); piece != sw->prims.rend(); ++piece) {
+      const bool inner = sweep::interior_only(*piece);
+      const Aabb reach = sweep::bounds(*piece).expanded(inner ? 0.0 : g).intersected(box);
+      if (reach.empty()) continue;
+      // (Outside the region no voxel counts: a piece it does not meet there
+      // may be left out.)
+      if (region && region(reach.center()) >= 0.5 * reach.size().norm()) continue;
+      (inner ? joints : near).push_back(&*piece);
+      if (!inner && sweep::lipschitz(*piece)) cone.push_back(&*piece);
+    }
+  }
+  // Joints last: they count only inside themselves, where a prism beside
+  // them mostly has the voxel already.
+  near.insert(near.end(), joints.begin(), joints.end());
+  if (near.empty()) return {};
+  Removal r;
+  auto all = std::make_shared<const NearPieces>(near, stock, g);
+  r.removed = [all, g](const Vec3& x, double floor) {
+    // As stored: the float nearest -d, negated back.
+    auto stored = [](double d) { return -static_cast<double>(static_cast<float>(-d)); };
+    double d = std::numeric_limits<double>::infinity();
+    for (const NearPieces::Piece& p : all->at(x)) {
+      if (!p.box.contains(x)) continue;
+      if (p.inner) {
+        const double lim = std::min(d, 0.0);
+        if (const double dj = sweep::distance_below(*p.prim, x, lim); dj < lim) d = dj;
+      } else {
+        d = std::min(d, sweep::distance(*p.prim, x));
+      }
+      if (stored(d) <= floor) return stored(d);
+    }
+    return std::isfinite(d) ? stored(d) : d;
+  };
+  if (!cone.empty()) {
+    // The stored value lies within 2^-24 |d| of d, so d + 1e-6 (|d| + h)
+    // is above it (a float's rounding of the quarter's reach, 2.6 h, is
+    // covered too) and stays 1-Lipschitz to 1e-6.
+    auto lip = std::make_shared<const NearPieces>(cone, stock, g);
+    r.cone = [lip, g, h](const Vec3& x, double lim) {
+      double d = std::numeric_limits<double>::infinity();
+      auto raised = [h](double v) { return v + 1e-6 * (std::abs(v) + h); };
+      for (const NearPieces::Piece& p : lip->at(x)) {
+        if (!p.box.contains(x)) continue;
+        d = std::min(d, sweep::distance(*p.prim, x));
+        if (raised(d) <= lim) break;
+      }
+      return raised(d);
+    };
+  }
+  return r;
 }
 
 std::string format_contact(const Contact& c, const std::string& program) {

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <span>
 #include <sstream>
 #include <sys/resource.h>
 
@@ -423,7 +424,10 @@ SimResult simulate(const SimOptions& opt) {
   struct StopAtContact {};
   // Consecutive moves are subtracted in batches: a leaf many short moves
   // reach is then visited once per batch, not once per move. Where the
-  // contact check finds a touch, it first subtracts the batch. The union
+  // contact check finds a touch the batch would change, it tests the pose
+  // again on the stock less the batch's latest cuts, held back, and only
+  // where the older ones would change what it then finds does it subtract
+  // the batch first (InterferenceChecker::PendingCuts). The union
   // removed does not depend on where batches end; they start small (an
   // interrupt or --partial soon has a result) and double up to a number
   // of moves and pieces. Sizes follow the program only, so runs repeat
@@ -458,12 +462,16 @@ SimResult simulate(const SimOptions& opt) {
     if (sweep::Sweep tail = join.finish(); !tail.prims.empty()) pending.push_back(std::move(tail));
     flush();
   };
-  InterferenceChecker::PendingCuts held;
-  held.change = [&](const Vec3& p, double v) { return cuts_change_voxel(pending, *res.stock, p, v); };
+  InterferenceChecker::PendingCuts held =
+      InterferenceChecker::pending_cuts([&] { return HeldCuts(pending); }, *res.stock, opt.latest_cuts);
   held.flush = [&] {
     const bool any = !pending.empty();
     flush();
     return any;
+  };
+  // A move's cut is held back where it reaches the stock's grid.
+  auto reaches_grid = [&](const sweep::Sweep& sw) {
+    return !sw.prims.empty() && sw.bounds.overlaps(res.stock->roi().expanded(res.stock->band_mm() + res.voxel_mm));
   };
   try {
   // Moves are checked in groups: their first scans side by side on the
@@ -492,33 +500,45 @@ SimResult simulate(const SimOptions& opt) {
       for (std::size_t j = r.begin(); j != r.end(); ++j) group[j].sw = planner.sweep(group[j].m, group[j].pm, *group[j].tool);
     });
     res.timing.plan_sweep_s += seconds_since(t0);
+    // Joined in order, then held as they will be when each move is checked:
+    // the batch, then the group's moves before it.
+    std::vector<sweep::Sweep> cuts;
+    std::vector<std::size_t> cuts_before(group.size() + 1, 0);
+    for (std::size_t j = 0; j < group.size(); ++j) {
+      join(group[j].sw);
+      cuts_before[j] = cuts.size();
+      if (reaches_grid(group[j].sw)) cuts.push_back(std::move(group[j].sw));
+    }
+    cuts_before[group.size()] = cuts.size();
     firsts.assign(group.size(), {});
     const auto t1 = Clock::now();
     if (group.size() > 1) {
       tbb::parallel_for(tbb::blocked_range<std::size_t>(0, group.size(), 1), [&](const auto& r) {
-        for (std::size_t j = r.begin(); j != r.end(); ++j)
-          firsts[j] = checker.first_scans(group[j].m, group[j].pm, *group[j].tool, &run_views[j]);
+        for (std::size_t j = r.begin(); j != r.end(); ++j) {
+          const HeldCuts before(pending, std::span<const sweep::Sweep>(cuts).first(cuts_before[j]));
+          const InterferenceChecker::PendingCuts view =
+              InterferenceChecker::pending_cuts([before] { return before; }, *res.stock, opt.latest_cuts);
+          firsts[j] = checker.first_scans(group[j].m, group[j].pm, *group[j].tool, &view, &run_views[j]);
+        }
       });
     }
     res.timing.contact_check_s += seconds_since(t1);
     const std::size_t subtractions = stock_changes;
     for (std::size_t j = 0; j < group.size(); ++j) {
       const motion::Move& m = group[j].m;
-      join(group[j].sw);
       const auto t2 = Clock::now();
       flush_s = 0;
       firsts[j].current = stock_changes == subtractions;
       const bool touched =
           checker.check(m, group[j].pm, *group[j].tool, &held, group.size() > 1 ? &firsts[j] : nullptr, &run_views[j]);
       res.timing.contact_check_s += seconds_since(t2) - flush_s;
-      sweep::Sweep& sw = group[j].sw;
-      if (!sw.prims.empty() && sw.bounds.overlaps(res.stock->roi().expanded(res.stock->band_mm() + res.voxel_mm))) {
-        pending_prims += sw.prims.size();
-        pending.push_back(std::move(sw));
+      if (cuts_before[j + 1] > cuts_before[j]) {
+        pending_prims += cuts[cuts_before[j]].prims.size();
+        pending.push_back(std::move(cuts[cuts_before[j]]));
       }
       pending_last_line = m.line;
       if (pending.empty() && !interrupted()) res.last_line_cut = m.line;  // nothing of it waits to be cut
-      if (pending.size() >= batch_moves || pending_prims >= kBatchPrims ||
+      if (pending.size() >= batch_moves || pending_prims >= kBatchPrims || !opt.hold_cuts ||
           (touched && stop_at_contact))
         flush();
       if (interrupted())

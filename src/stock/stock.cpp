@@ -1772,7 +1772,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
 
 Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3&)>& region,
                        const std::function<double(const Vec3&, double)>& removed, double min_depth_mm,
-                       const std::function<double(const Vec3&, Vec3*)>& region_plane, bool removed_lipschitz) const {
+                       const std::function<double(const Vec3&, Vec3*)>& region_plane,
+                       const std::function<double(const Vec3&, double)>& removed_cone) const {
   const Impl& m = *impl_;
   Overlap best;
   const Aabb wb = bounds.intersected(m.box.expanded(m.h));
@@ -1823,6 +1824,13 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
       const double block_reach = -rc + hd0 * (1 + 1e-12);
       CoordBBox part = CoordBBox::createCube(o, kLeafDim);
       part.intersect(bb);
+      // A whole leaf deeper in what was removed than its reach (the
+      // quarters' test below, once for their eight).
+      if (removed_cone && part == CoordBBox::createCube(o, kLeafDim)) {
+        const double lim = floor - hd0 * (1 + 1e-12) - kPlaneMargin;
+        const Vec3 c0 = m.origin + m.h * (Vec3(o.x(), o.y(), o.z()).array() + 0.5 * (kLeafDim - 1)).matrix();
+        if (removed_cone(c0, lim) <= lim) continue;
+      }
       // Per 4^3 quarter: its deepest material, then the region at its
       // centre, bound the depth of its voxels before any is evaluated.
       for (int qx = 0; qx < kLeafDim; qx += 4)
@@ -1853,9 +1861,9 @@ Overlap Stock::overlap(const Aabb& bounds, const std::function<double(const Vec3
             // tool lies just behind its edge: on the snowflake, three in four
             // of the scans' evaluations of `removed` were in such quarters.)
             const bool whole = qb == CoordBBox::createCube(q0, 4);
-            if (removed_lipschitz && whole) {
+            if (removed_cone && whole) {
               const double lim = floor - hq * (1 + 1e-12) - kPlaneMargin;
-              if (removed(cq, lim) <= lim) continue;
+              if (removed_cone(cq, lim) <= lim) continue;
             }
             // A voxel: its tests against the floor as it stands, then the region.
             auto visit = [&](int x, int y, int z) {

@@ -4,6 +4,7 @@
 #include <atomic>
 #include <functional>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -27,15 +28,32 @@ struct Contact {
   long last_pose = -1;       ///< (internal) index of the last pose that touched
 };
 
-/// Checks each move against the stock before its cut is subtracted. At
-/// poses spaced along the move, every region is tested against the
-/// material still there at that pose: the stock before the move less what
-/// the cutting part swept from the move's start to that pose (on a rapid,
-/// nothing is cut first). The caller may hold cuts back to subtract them in
-/// a batch (PendingCuts): a touch found on the stock without them stands
-/// as found when they would leave its deepest voxel as it is (they only
-/// take material away, so nowhere else can get deeper than it); else they
-/// are subtracted and the pose is tested again.
+/// Material taken away from the stock as Stock::overlap's `removed` sees it.
+struct Removal {
+  std::function<double(const Vec3&, double)> removed;  ///< empty: nothing
+  /// 1-Lipschitz and nowhere below `removed` over the scan (may be empty):
+  /// Stock::overlap's `removed_cone`.
+  std::function<double(const Vec3&, double)> cone;
+};
+
+/// Cuts held back from the stock, oldest first: a run of one vector's, then
+/// of another's (a batch, then a group's moves before the one checked).
+struct HeldCuts {
+  std::span<const sweep::Sweep> a, b;
+  HeldCuts() = default;
+  HeldCuts(std::span<const sweep::Sweep> first_run, std::span<const sweep::Sweep> then = {}) : a(first_run), b(then) {}
+  HeldCuts(const std::vector<sweep::Sweep>& v) : a(v) {}
+  std::size_t size() const { return a.size() + b.size(); }
+  const sweep::Sweep& operator[](std::size_t i) const { return i < a.size() ? a[i] : b[i - a.size()]; }
+  /// The first n, and those after them.
+  HeldCuts first(std::size_t n) const {
+    return n <= a.size() ? HeldCuts(a.first(n)) : HeldCuts(a, b.first(n - a.size()));
+  }
+  HeldCuts after(std::size_t n) const {
+    return n <= a.size() ? HeldCuts(a.subspan(n), b) : HeldCuts({}, b.subspan(n - a.size()));
+  }
+};
+
 /// A pointed V tool planing: consecutive straight cuts at one orientation,
 /// each forward along the cutting direction, all in one plane through the
 /// tool axis (the snowflake's scan lines). Behind its edge the clearance
@@ -72,6 +90,18 @@ private:
   const tool::Tool* tool_ = nullptr;
 };
 
+/// Checks each move against the stock before its cut is subtracted. At
+/// poses spaced along the move, every region is tested against the
+/// material still there at that pose: the stock before the move less what
+/// the cutting part swept from the move's start to that pose (on a rapid,
+/// nothing is cut first). The caller may hold cuts back to subtract them in
+/// a batch (PendingCuts): a touch found on the stock without them stands
+/// as found when they would leave its deepest voxel as it is (they only
+/// take material away, so nowhere else can get deeper than it); else the
+/// pose is tested again on the stock less the latest of them, as the
+/// update would leave it (PendingCuts::removal), and what that finds stands
+/// where the others leave its deepest voxel as it is; else they are all
+/// subtracted and the pose tested again.
 class InterferenceChecker {
 public:
   /// Cuts the caller holds back from the stock.
@@ -79,9 +109,21 @@ public:
     /// Would they change the stock's voxel at `p`, whose value is `v`?
     /// (May say yes when unsure; must not say no when they would.)
     std::function<bool(const Vec3& p, double v)> change;
-    /// Subtracts them; true when there were any.
+    /// The distance of the latest of them (or all) near `box` as the stock
+    /// would hold it once they are subtracted (pending_removal).
+    std::function<Removal(const Aabb& box, const std::function<double(const Vec3&)>& region)> removal;
+    /// As `change`, for those `removal` leaves out.
+    std::function<bool(const Vec3& p, double v)> older_change;
+    /// Subtracts them; true when there were any (may be empty: first_scans).
     std::function<bool()> flush;
   };
+  /// PendingCuts for the cuts `held` gives at each call, the `latest` of
+  /// them weighed voxel by voxel (pending_removal); no flush.
+  static PendingCuts pending_cuts(std::function<HeldCuts()> held, const stock::Stock& stock,
+                                  std::size_t latest = kLatestCuts);
+  /// The latest of the cuts held back that a test weighs at every voxel it
+  /// asks for: a few passes of the snowflake's raster.
+  static constexpr std::size_t kLatestCuts = 400;
   InterferenceChecker(const stock::Stock& stock, const Planner& planner, double tolerance_mm,
                       double sweep_tolerance_mm);
   /// The first scan of each pose and region `check` makes for this move,
@@ -92,11 +134,13 @@ public:
     struct Job {
       int pose = 0;  ///< 1-based, of `poses`
       std::string region;
-      std::function<stock::Overlap()> scan;
+      std::function<stock::Overlap(const PendingCuts*)> scan;  ///< (null: no cuts held back)
       stock::Overlap found;  ///< what it found
     };
     std::vector<Job> jobs;
     int poses = 0;
+    /// Made on the stock less the cuts held back then, as check makes them.
+    bool held_back = false;
     /// The stock has not changed since: every scan stands. Else only those
     /// that found no touch (the stock has only lost material since).
     bool current = false;
@@ -104,7 +148,7 @@ public:
   /// With `run` (the move's planing run), poses whose flank body the run
   /// clears (PlaningRun::flank_clear) are not scanned.
   FirstScans first_scans(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
-                         const PlaningRun::View* run = nullptr) const;
+                         const PendingCuts* pending = nullptr, const PlaningRun::View* run = nullptr) const;
   /// Returns true when this move touched. With `first` (first_scans of
   /// this move, with the same `run`), the scans that stand are not made
   /// again.
@@ -119,7 +163,8 @@ public:
   static double pose_spacing(const tool::Tool& t, double voxel_mm);
 
 private:
-  using Scan = std::function<stock::Overlap()>;
+  /// A scan, on the stock less what `pending` holds back (null: none).
+  using Scan = std::function<stock::Overlap(const PendingCuts* pending)>;
   /// Calls on_pose for each pose, and on_scan for each region a pose
   /// brings near the material, with the scan of that region at that pose
   /// (against the stock less what the move cut before it).
@@ -139,7 +184,19 @@ private:
 /// value is `v`? Never no where they would (what PendingCuts::change must
 /// answer for cuts held back in a batch); yes only where a piece the update
 /// would evaluate there comes nearer than -v.
-bool cuts_change_voxel(const std::vector<sweep::Sweep>& cuts, const stock::Stock& stock, const Vec3& p, double v);
+bool cuts_change_voxel(const HeldCuts& cuts, const stock::Stock& stock, const Vec3& p, double v);
+
+/// What subtracting `cuts` would leave at the voxel centres in `box` (and
+/// inside `region`, a distance exact or a lower bound outside; empty: all), as a
+/// distance r for Stock::overlap's `removed` (the material there becomes
+/// max(v, -r)): the value the update would store, to the float, where the
+/// cuts change a voxel, and where they do not, some r no less than -v or
+/// beyond the band. A joint piece (sweep::interior_only) counts only inside
+/// itself, as in the update. `removed(p, floor)` may stop once it is at
+/// most the floor. The cone: the nearest of the 1-Lipschitz pieces other
+/// than joints, raised by more than the float's rounding.
+Removal pending_removal(const HeldCuts& cuts, const stock::Stock& stock, const Aabb& box,
+                        const std::function<double(const Vec3&)>& region = nullptr);
 
 /// `prog.nc:1234: clearance-face contact 0.8 um deep at (x, y, z): G1 X...`
 std::string format_contact(const Contact& c, const std::string& program);

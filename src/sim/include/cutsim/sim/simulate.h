@@ -55,6 +55,13 @@ struct SimOptions {
   /// run's groove clears are not scanned (sim::PlaningRun; the results do
   /// not depend on it: false scans them, for the tests that compare).
   bool planing_runs = true;
+  /// Cuts held back and subtracted in batches (false: each move's cut is
+  /// subtracted before the next move is checked; the results are the
+  /// same, the reference for tests).
+  bool hold_cuts = true;
+  /// How many of the latest held cuts a contact test weighs voxel by voxel
+  /// (the results do not depend on it).
+  std::size_t latest_cuts = InterferenceChecker::kLatestCuts;
   /// Bounds of the target, when there is one: a target that misses the
   /// stock is refused before any grid is built.
   std::optional<Aabb> target_bounds;

@@ -168,14 +168,16 @@ public:
   /// region(x) and sets a subgradient g, so region(y) >= region(x) + g . (y -
   /// x) everywhere; each 4^3 quarter's voxels are then bounded by that plane
   /// at its centre (the same result, fewer evaluations of `region`).
-  /// `removed_lipschitz`: `removed` is 1-Lipschitz over the ROI (a sweep of
-  /// pieces that are, sweep::lipschitz): a 4^3 quarter whose centre lies
+  /// `removed_cone` (may be empty): 1-Lipschitz over the ROI and nowhere
+  /// below `removed` (`removed` itself where that is 1-Lipschitz, a sweep of
+  /// pieces that are, sweep::lipschitz; else a part of what it takes the
+  /// least of), called as `removed` is: a 4^3 quarter whose centre lies
   /// deeper in it than the quarter's reach is passed over, as all its voxels
   /// would be (the same result, fewer evaluations of `region` and `removed`).
   Overlap overlap(const Aabb& bounds, const std::function<double(const Vec3&)>& region,
                   const std::function<double(const Vec3&, double)>& removed, double min_depth_mm,
                   const std::function<double(const Vec3&, Vec3*)>& region_plane = nullptr,
-                  bool removed_lipschitz = false) const;
+                  const std::function<double(const Vec3&, double)>& removed_cone = nullptr) const;
 
   /// Level-set value at a world point (trilinear), mm.
   double sample(const Vec3& p) const;
