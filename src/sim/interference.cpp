@@ -73,7 +73,8 @@ PlaningRun::View PlaningRun::next(const motion::Move& m, const PlannedMove& pm, 
   return v;
 }
 
-bool PlaningRun::flank_clear(const View& v, const tool::FlankBody& f, const Pose& at, double top, double tol) {
+PlaningRun::Span PlaningRun::flank_span(const View& v, const tool::FlankBody& f, const Pose& at, double top,
+                                         double tol) {
   // A voxel deeper than tol in the body lies in its flank term's region:
   // the wedge's distance d in the rake plane, at t behind the edge, has
   // d cos(clearance) + t sin(clearance) < -tol, so the wedge eroded by
@@ -84,31 +85,49 @@ bool PlaningRun::flank_clear(const View& v, const tool::FlankBody& f, const Pose
   // higher than k t above the pose. Upwards the body ends below the pose's
   // tip plus the edge's height, the groove at the path's plus it: above
   // that, the stock's top must be. Behind T, where the raised wedge clears
-  // the top, or the body's end, nothing of it is below the top.
-  if (!v.tips || v.count == 0 || tol <= 0 || !(at.linear() == v.rotation)) return false;
+  // the top, or the body's end, nothing of it is below the top. Both tests
+  // are linear in t along a segment of the path: where they hold at its
+  // ends, they hold along it.
+  const Span unknown;
+  if (!v.tips || v.count == 0 || tol <= 0 || !(at.linear() == v.rotation)) return unknown;
   const tool::EdgeProfile& e = f.edge;
-  if (e.nose_radius != 0 || f.rake < 0 || f.clearance < 0) return false;
+  if (e.nose_radius != 0 || f.rake < 0 || f.clearance < 0) return unknown;
   const Vec3 along = v.rotation * Vec3(e.cos_o, e.sin_o, 0), across = v.rotation * Vec3(-e.sin_o, e.cos_o, 0);
   const std::vector<Vec3>& tips = *v.tips;
   const Vec3 p = at.translation();
-  if ((p - tips[v.count - 1]).dot(along) < 0 || std::fabs((p - tips.front()).dot(across)) > kRunGap) return false;
+  if ((p - tips[v.count - 1]).dot(along) < 0 || std::fabs((p - tips.front()).dot(across)) > kRunGap) return unknown;
   const double k = std::tan(f.clearance) / std::sin(e.half_angle);
   const double cp = p.z();
-  if (cp >= top) return true;  // the body lies above the tip
-  if (cp + e.height < top) return false;
+  Span span{true, std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
+  if (cp >= top) return span;  // the body lies above the tip
+  if (cp + e.height < top) return unknown;
   const double reach = k > 0 ? std::min(f.length, (top - cp) / k) : f.length;
-  double t0 = 0, z0 = 0;  // the last point checked: the pose
+  auto holds = [&](double t, double z) { return z <= k * t && cp + z + e.height >= top; };
+  auto unsure = [&](double a, double b) {
+    span.lo = std::min(span.lo, a);
+    span.hi = std::max(span.hi, b);
+  };
+  double t0 = 0, z0 = 0;  // the last point checked: the pose, where both hold
+  bool h0 = true;
   for (std::size_t i = v.count; i-- > 0;) {
     const double t = (p - tips[i]).dot(along), z = tips[i].z() - cp;
     if (t >= reach) {
       const double zr = t > t0 ? z0 + (z - z0) * (reach - t0) / (t - t0) : z;
-      return zr <= k * reach && cp + zr + e.height >= top;
+      if (!h0 || !holds(reach, zr)) unsure(t0, reach);
+      return span;
     }
-    if (z > k * t || tips[i].z() + e.height < top) return false;
+    const bool h = holds(t, z);
+    if (!h0 || !h) unsure(t0, t);
     t0 = t;
     z0 = z;
+    h0 = h;
   }
-  return false;  // the run starts nearer than the body reaches below the top
+  unsure(t0, reach);  // the run starts nearer than the body reaches below the top
+  return span;
+}
+
+bool PlaningRun::flank_clear(const View& v, const tool::FlankBody& f, const Pose& at, double top, double tol) {
+  return flank_span(v, f, at, top, tol).clear();
 }
 
 void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, const tool::Tool& tool,
@@ -164,14 +183,26 @@ void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, con
       const tool::Region& rg = regions[i];
       at[i] = pose * rg.frame;
       const Pose before = prev * rg.frame;
-      if (const auto* flank = std::get_if<tool::FlankBody>(&rg.shape);
-          flank && run && !rapid && PlaningRun::flank_clear(*run, *flank, at[i], stock_.box().max.z(), tol_)) {
-        if (regions.size() == 1) cleared_.fetch_add(1, std::memory_order_relaxed);
-        boxes.push_back(Aabb());
-        continue;
-      }
-      // Only the part of a V tool's body below the top of the material counts.
+      // Only the part of a V tool's body below the top of the material
+      // counts; of a planing run's, only the stretch behind the edge its
+      // groove may not clear.
       Aabb b = sweep::world_box_within(rg.shape, at[i].linear(), at[i].translation(), reach);
+      if (const auto* flank = std::get_if<tool::FlankBody>(&rg.shape); flank && run && !rapid) {
+        const PlaningRun::Span span = PlaningRun::flank_span(*run, *flank, at[i], stock_.box().max.z(), tol_);
+        if (span.clear()) {
+          if (regions.size() == 1) cleared_.fetch_add(1, std::memory_order_relaxed);
+          boxes.push_back(Aabb());
+          continue;
+        }
+        const Vec3 along = at[i].linear() * Vec3(flank->edge.cos_o, flank->edge.sin_o, 0);
+        if (span.known && along.y() == 0 && along.z() == 0 && std::fabs(along.x()) == 1) {
+          // (A voxel's margin: the scan takes the voxels about the box.)
+          const double x = at[i].translation().x(), hv = stock_.voxel_mm();
+          const double x0 = x - along.x() * span.hi, x1 = x - along.x() * span.lo;
+          b.min.x() = std::max(b.min.x(), std::min(x0, x1) - hv);
+          b.max.x() = std::min(b.max.x(), std::max(x0, x1) + hv);
+        }
+      }
       if (swept(rg.shape)) {
         b.extend(sweep::world_box_within(rg.shape, before.linear(), before.translation(), reach));
         if (b.expanded(0.1 * b.size().norm()).overlaps(reach)) {

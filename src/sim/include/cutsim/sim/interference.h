@@ -83,6 +83,15 @@ public:
   /// voxel is deeper than `tol` in both the body and the material the
   /// run's cuts leave. False where unsure.
   static bool flank_clear(const View& v, const tool::FlankBody& f, const Pose& at, double top, double tol);
+  /// Where behind the edge (t along the cutting direction, mm) the body may
+  /// hold a voxel deeper than `tol` in the material the run's cuts leave:
+  /// within [lo, hi] (empty: nowhere, flank_clear); unknown: anywhere.
+  struct Span {
+    bool known = false;
+    double lo = 0, hi = 0;
+    bool clear() const { return known && lo > hi; }
+  };
+  static Span flank_span(const View& v, const tool::FlankBody& f, const Pose& at, double top, double tol);
 
 private:
   std::shared_ptr<std::vector<Vec3>> tips_;
