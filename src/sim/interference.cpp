@@ -281,8 +281,10 @@ InterferenceChecker::FirstScans InterferenceChecker::first_scans(const motion::M
       [&](const std::string& region, int pose, Scan scan) {
         FirstScans::Job job{pose, region, std::move(scan), {}};
         job.found = job.scan(nullptr);
-        if (pending && job.found.depth_mm > tol_ && pending->change(job.found.where, job.found.stock_value))
+        if (pending && job.found.depth_mm > tol_ && pending->change(job.found.where, job.found.stock_value)) {
           job.found = job.scan(pending);
+          job.weighed = true;
+        }
         out.jobs.push_back(std::move(job));
       },
       run);
@@ -310,11 +312,13 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
   const bool rapid = m.kind == motion::MotionKind::rapid;
   bool touched = false;
   bool current = first && first->current;  // (until settle subtracts cuts)
+  bool weighed_found = false;                // the first scan's touch was weighed against the held cuts
   auto take = [&](const std::string& region, const stock::Overlap* found, const Scan& scan) {
     // A scan made earlier stands where the stock has not changed since,
     // and where it found no touch (the stock only loses material).
     const bool stands = found && (current || found->depth_mm <= tol_);
     stock::Overlap ov = stands ? *found : scan(nullptr);
+    bool weighed = stands && first->held_back && weighed_found;
     // The batch's pending cuts only take material away: without a
     // contact on the stock as it is, there is none after them either, and
     // where they leave the deepest voxel as it is, that stays the deepest
@@ -322,11 +326,25 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     // tested again on the stock less them, still held back: subtracting
     // them here (a batch of a few moves at each of the snowflake's 31k
     // rubbing poses) doubled the voxels the update evaluated.
-    if (!(stands && first->held_back) && ov.depth_mm > tol_ && pending && pending->change(ov.where, ov.stock_value))
+    if (!(stands && first->held_back) && ov.depth_mm > tol_ && pending && pending->change(ov.where, ov.stock_value)) {
       ov = scan(pending);
+      weighed = true;
+    }
     if (ov.depth_mm > tol_ && pending && pending->older_change(ov.where, ov.stock_value) && pending->flush()) {
       current = false;
+      vanished_ = 0;
       ov = scan(nullptr);
+    } else if (weighed && pending) {
+      // Where the held cuts keep taking away every touch (the lens's nose
+      // tool: its flank lies in what the moves just before cut, and no
+      // contact is left), each pose weighs them over all the material they
+      // removed: after a few such poses in a row, subtract them instead.
+      // (Real rubs, the snowflake's, keep the batch whole.)
+      if (ov.depth_mm > tol_) vanished_ = 0;
+      else if (++vanished_ >= kVanishedBeforeFlush && pending->flush()) {
+        current = false;
+        vanished_ = 0;
+      }
     }
     if (ov.depth_mm <= tol_) return;
     touched = true;
@@ -358,6 +376,7 @@ bool InterferenceChecker::check(const motion::Move& m, const PlannedMove& pm, co
     const long base = pose_index_;
     for (const FirstScans::Job& job : first->jobs) {
       pose_index_ = base + job.pose;
+      weighed_found = job.weighed;
       take(job.region, &job.found, job.scan);
     }
     pose_index_ = base + first->poses;

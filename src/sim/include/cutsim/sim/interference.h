@@ -145,6 +145,7 @@ public:
       std::string region;
       std::function<stock::Overlap(const PendingCuts*)> scan;  ///< (null: no cuts held back)
       stock::Overlap found;  ///< what it found
+      bool weighed = false;  ///< found on the stock less the held cuts (its touch on the stock was theirs)
     };
     std::vector<Job> jobs;
     int poses = 0;
@@ -185,6 +186,10 @@ private:
   const Planner& planner_;
   double tol_, sweep_tol_;
   long pose_index_ = 0;
+  /// Poses in a row whose touch the held cuts took away when weighed, and
+  /// how many make the check subtract them instead.
+  int vanished_ = 0;
+  static constexpr int kVanishedBeforeFlush = 4;
   mutable std::atomic<long> cleared_{0};  // (walks of one group run side by side)
   std::vector<Contact> contacts_;
 };
