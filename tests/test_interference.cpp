@@ -48,6 +48,22 @@ std::string slope_program(double deg) {
   return os.str();
 }
 
+// The same contacts (every field the report gives) and the same cut.
+void expect_same_contacts(const sim::SimResult& want, const sim::SimResult& got, const std::string& what) {
+  ASSERT_EQ(got.contacts.size(), want.contacts.size()) << what;
+  for (std::size_t i = 0; i < want.contacts.size(); ++i) {
+    const auto &a = want.contacts[i], &b = got.contacts[i];
+    EXPECT_EQ(a.line, b.line) << what << ", contact " << i;
+    EXPECT_EQ(a.region, b.region) << what << ", line " << a.line;
+    EXPECT_EQ(a.rapid, b.rapid) << what << ", line " << a.line;
+    EXPECT_EQ(a.depth_mm, b.depth_mm) << what << ", line " << a.line;
+    EXPECT_EQ(a.where, b.where) << what << ", line " << a.line;
+    EXPECT_EQ(a.at_least, b.at_least) << what << ", line " << a.line;
+    EXPECT_EQ(a.poses, b.poses) << what << ", line " << a.line;
+  }
+  EXPECT_EQ(got.stock->removed_volume_mm3(), want.stock->removed_volume_mm3()) << what;
+}
+
 }  // namespace
 
 // Where the path falls in the cutting direction, the surface the nose has
@@ -440,17 +456,7 @@ TEST(Interference, MovesScannedSideBySideGiveTheContactsOfOneAtATime) {
     const auto one = sim::simulate(o);
     o.check_group = 8;
     const auto grouped = sim::simulate(o);
-    ASSERT_EQ(one.contacts.size(), grouped.contacts.size()) << c.program;
-    for (std::size_t i = 0; i < one.contacts.size(); ++i) {
-      const auto &a = one.contacts[i], &b = grouped.contacts[i];
-      EXPECT_EQ(a.line, b.line);
-      EXPECT_EQ(a.region, b.region);
-      EXPECT_EQ(a.rapid, b.rapid);
-      EXPECT_EQ(a.depth_mm, b.depth_mm);
-      EXPECT_EQ(a.where, b.where);
-      EXPECT_EQ(a.poses, b.poses);
-    }
-    EXPECT_EQ(one.stock->removed_volume_mm3(), grouped.stock->removed_volume_mm3());
+    expect_same_contacts(one, grouped, c.program);
   }
 }
 
@@ -490,6 +496,13 @@ TEST(Interference, ContactsOnTheStockLessTheHeldCutsAreThoseOfMoveByMove) {
   const auto latest = sim::simulate(o);
   o.check_group = 1;
   const auto alone = sim::simulate(o);
+  // (And every pose weighed, none cleared by its planing run.)
+  o.check_group = 8;
+  o.latest_cuts = sim::InterferenceChecker::kLatestCuts;
+  o.planing_runs = false;
+  const auto scanned = sim::simulate(o);
+  EXPECT_GT(held.poses_cleared_by_runs, 0);
+  EXPECT_EQ(scanned.poses_cleared_by_runs, 0);
   EXPECT_GT(moves, 150);
   // Every move subtracted at once, and the batches: 8, 16, 32, ...
   EXPECT_GT(each.stock->stats().grid_updates, held.stock->stats().grid_updates + 150);
@@ -497,19 +510,10 @@ TEST(Interference, ContactsOnTheStockLessTheHeldCutsAreThoseOfMoveByMove) {
   std::set<int> passes;
   for (const auto& c : each.contacts) passes.insert(c.line / 34);
   EXPECT_GE(passes.size(), 5u) << "every pass's flank rubs";
-  for (const auto* r : {&held, &latest, &alone}) {
-    ASSERT_EQ(r->contacts.size(), each.contacts.size());
-    for (std::size_t i = 0; i < each.contacts.size(); ++i) {
-      const auto &a = each.contacts[i], &b = r->contacts[i];
-      EXPECT_EQ(a.line, b.line) << i;
-      EXPECT_EQ(a.region, b.region) << i;
-      EXPECT_EQ(a.depth_mm, b.depth_mm) << "line " << a.line;
-      EXPECT_EQ(a.where, b.where) << "line " << a.line;
-      EXPECT_EQ(a.at_least, b.at_least) << "line " << a.line;
-      EXPECT_EQ(a.poses, b.poses) << "line " << a.line;
-    }
-    EXPECT_EQ(r->stock->removed_volume_mm3(), each.stock->removed_volume_mm3());
-  }
+  expect_same_contacts(each, held, "held back, the latest 400 weighed");
+  expect_same_contacts(each, latest, "the latest 3 weighed");
+  expect_same_contacts(each, alone, "one move at a time");
+  expect_same_contacts(each, scanned, "no planing runs");
 }
 
 // The contact check leaves a batch's cuts held back unless they would
@@ -965,16 +969,7 @@ TEST(Interference, PlaningRunsGiveTheContactsOfScanningEveryPose) {
   // rest), those on the wave's rises and gentle falls.
   EXPECT_GT(runs.poses_cleared_by_runs, 150);
   ASSERT_FALSE(every.contacts.empty());
-  ASSERT_EQ(runs.contacts.size(), every.contacts.size());
-  for (std::size_t i = 0; i < every.contacts.size(); ++i) {
-    const auto &a = runs.contacts[i], &b = every.contacts[i];
-    EXPECT_EQ(a.line, b.line);
-    EXPECT_EQ(a.region, b.region);
-    EXPECT_EQ(a.depth_mm, b.depth_mm);
-    EXPECT_EQ(a.where, b.where);
-    EXPECT_EQ(a.poses, b.poses);
-  }
-  EXPECT_EQ(runs.stock->removed_volume_mm3(), every.stock->removed_volume_mm3());
+  expect_same_contacts(every, runs, "planing runs");
 }
 
 TEST(ToolSpec, EveryKindParsesWithItsDefaults) {
