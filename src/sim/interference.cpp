@@ -186,16 +186,20 @@ void InterferenceChecker::walk(const motion::Move& m, const PlannedMove& pm, con
       // Only the part of a V tool's body below the top of the material
       // counts; of a planing run's, only the stretch behind the edge its
       // groove may not clear.
-      Aabb b = sweep::world_box_within(rg.shape, at[i].linear(), at[i].translation(), reach);
-      if (const auto* flank = std::get_if<tool::FlankBody>(&rg.shape); flank && run && !rapid) {
-        const PlaningRun::Span span = PlaningRun::flank_span(*run, *flank, at[i], stock_.box().max.z(), tol_);
-        if (span.clear()) {
+      PlaningRun::Span span;
+      const auto* flank = std::get_if<tool::FlankBody>(&rg.shape);
+      if (flank && run && !rapid) {
+        span = PlaningRun::flank_span(*run, *flank, at[i], stock_.box().max.z(), tol_);
+        if (span.clear()) {  // (before its box: most of the snowflake's poses)
           if (regions.size() == 1) cleared_.fetch_add(1, std::memory_order_relaxed);
           boxes.push_back(Aabb());
           continue;
         }
+      }
+      Aabb b = sweep::world_box_within(rg.shape, at[i].linear(), at[i].translation(), reach);
+      if (span.known) {
         const Vec3 along = at[i].linear() * Vec3(flank->edge.cos_o, flank->edge.sin_o, 0);
-        if (span.known && along.y() == 0 && along.z() == 0 && std::fabs(along.x()) == 1) {
+        if (along.y() == 0 && along.z() == 0 && std::fabs(along.x()) == 1) {
           // (A voxel's margin: the scan takes the voxels about the box.)
           const double x = at[i].translation().x(), hv = stock_.voxel_mm();
           const double x0 = x - along.x() * span.hi, x1 = x - along.x() * span.lo;
