@@ -205,7 +205,9 @@ TEST(Cli, TwoRunsGiveBitIdenticalReportsAndMeshes) {
 
 }  // namespace
 // A V tool's planing (the snowflake's path: one-piece prism quarters and
-// joints) cut with CUTSIM_AVX2=1 and =0: the same glb.
+// joints; with AVX2 the quarters of several pieces lower their bars
+// without the portable version's cone) cut with CUTSIM_AVX2=1 and =0: the
+// same glb.
 TEST(Cli, Avx2LoopsCutTheSameVToolStockAsThePortableOnes) {
   TempDir dir;
   std::string prog = "G21 G90 G94\nG0 Z0.1\n";

@@ -361,58 +361,73 @@ TEST(VoxelKernels, OverlapCandidatesGiveThePortableBits) {
   EXPECT_GT(on_plane, 300);
 }
 
+namespace {
+// The profile prisms (ProfilePrim::prism) of prism_moves and of the
+// snowflake's tool, each with its move.
+struct KernelPrism {
+  PrismMove move;
+  sweep::ProfilePrim prism;
+};
+std::vector<KernelPrism> kernel_prisms() {
+  std::vector<PrismMove> cases = prism_moves();
+  cases.push_back({"vtool:angle=90,clearance=7,h=0.1,body=0.3", Vec3(0.05, 0, 0), Eigen::Matrix3d::Identity()});
+  std::vector<KernelPrism> out;
+  for (const PrismMove& cs : cases) {
+    const sweep::Sweep sw =
+        sweep::sweep_line(prism_start, prism_start + cs.move, cs.frame, tool::parse_tool_spec(cs.spec, "test"));
+    for (const sweep::Primitive& piece : sw.prims)
+      if (const auto* pp = std::get_if<sweep::ProfilePrim>(&piece); pp && pp->prism) out.push_back({cs, *pp});
+  }
+  return out;
+}
+}  // namespace
+
 // A profile prism's distances four at a time (prism_distances) against
 // sweep::detail::prism_distance, to the bit: V and nose tools, moves along
 // the cutting direction, sheared sideways and back along it, a tilted
 // frame (prism_moves, and the snowflake's tool); points inside, beside,
 // past the ends and beyond the box.
 TEST(VoxelKernels, PrismDistancesGiveThePortableBits) {
-  std::vector<PrismMove> cases = prism_moves();
-  cases.push_back({"vtool:angle=90,clearance=7,h=0.1,body=0.3", Vec3(0.05, 0, 0), Eigen::Matrix3d::Identity()});
   std::mt19937_64 rng(17);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   int prisms = 0, inside = 0, outside = 0, boxed = 0;
-  for (const PrismMove& cs : cases) {
-    const sweep::Sweep sw =
-        sweep::sweep_line(prism_start, prism_start + cs.move, cs.frame, tool::parse_tool_spec(cs.spec, "test"));
-    for (const sweep::Primitive& piece : sw.prims) {
-      const auto* pp = std::get_if<sweep::ProfilePrim>(&piece);
-      if (!pp || !pp->prism) continue;
-      ++prisms;
-      const Aabb box = pp->bounds.expanded(0.05);
-      for (int trial = 0; trial < 500; ++trial) {
-        const int n = static_cast<int>(rng() % 65);
-        std::array<double, 64> px{}, py{}, pz{}, portable{}, dispatched{}, wide{};
-        for (int i = 0; i < n; ++i) {
-          px[i] = box.min.x() + u(rng) * (box.max.x() - box.min.x());
-          py[i] = box.min.y() + u(rng) * (box.max.y() - box.min.y());
-          pz[i] = box.min.z() + u(rng) * (box.max.z() - box.min.z());
-          if (rng() % 8 == 0) {  // on the move's line (the apex's path): the round case at r = 0
-            const double t = u(rng) * 1.2 - 0.1;
-            const Vec3 w = pp->origin + pp->to_local.transpose() * (t * pp->d_local);
-            px[i] = w.x();
-            py[i] = w.y();
-            pz[i] = w.z();
-          }
+  for (const KernelPrism& kp : kernel_prisms()) {
+    const auto* pp = &kp.prism;
+    const PrismMove& cs = kp.move;
+    ++prisms;
+    const Aabb box = pp->bounds.expanded(0.05);
+    for (int trial = 0; trial < 500; ++trial) {
+      const int n = static_cast<int>(rng() % 65);
+      std::array<double, 64> px{}, py{}, pz{}, portable{}, dispatched{}, wide{};
+      for (int i = 0; i < n; ++i) {
+        px[i] = box.min.x() + u(rng) * (box.max.x() - box.min.x());
+        py[i] = box.min.y() + u(rng) * (box.max.y() - box.min.y());
+        pz[i] = box.min.z() + u(rng) * (box.max.z() - box.min.z());
+        if (rng() % 8 == 0) {  // on the move's line (the apex's path): the round case at r = 0
+          const double t = u(rng) * 1.2 - 0.1;
+          const Vec3 w = pp->origin + pp->to_local.transpose() * (t * pp->d_local);
+          px[i] = w.x();
+          py[i] = w.y();
+          pz[i] = w.z();
         }
-        stock::detail::prism_distances_scalar(*pp, 0, n, px.data(), py.data(), pz.data(), portable.data());
-        stock::detail::prism_distances(*pp, n, px.data(), py.data(), pz.data(), dispatched.data());
-        ASSERT_EQ(0, std::memcmp(portable.data(), dispatched.data(), sizeof portable)) << cs.spec << ", trial " << trial;
-        if (stock::detail::cpu_has_avx2()) {
-          stock::detail::prism_distances_avx2(*pp, n, px.data(), py.data(), pz.data(), wide.data());
-          for (int i = 0; i < n; ++i)
-            ASSERT_EQ(0, std::memcmp(&portable[static_cast<std::size_t>(i)], &wide[static_cast<std::size_t>(i)], sizeof(double)))
-                << cs.spec << ", trial " << trial << ", point " << i << ": " << portable[static_cast<std::size_t>(i)]
-                << " against " << wide[static_cast<std::size_t>(i)];
-        }
-        for (int i = 0; i < n; ++i) {
-          const Vec3 w(px[i], py[i], pz[i]);
-          const double want = sweep::detail::prism_distance(*pp, w);
-          ASSERT_EQ(0, std::memcmp(&want, &portable[static_cast<std::size_t>(i)], sizeof want));
-          inside += want < 0;
-          outside += want > 0;
-          boxed += want > 0 && want * want == sweep::detail::box_distance2(pp->bounds, w);
-        }
+      }
+      stock::detail::prism_distances_scalar(*pp, 0, n, px.data(), py.data(), pz.data(), portable.data());
+      stock::detail::prism_distances(*pp, n, px.data(), py.data(), pz.data(), dispatched.data());
+      ASSERT_EQ(0, std::memcmp(portable.data(), dispatched.data(), sizeof portable)) << cs.spec << ", trial " << trial;
+      if (stock::detail::cpu_has_avx2()) {
+        stock::detail::prism_distances_avx2(*pp, n, px.data(), py.data(), pz.data(), wide.data());
+        for (int i = 0; i < n; ++i)
+          ASSERT_EQ(0, std::memcmp(&portable[static_cast<std::size_t>(i)], &wide[static_cast<std::size_t>(i)], sizeof(double)))
+              << cs.spec << ", trial " << trial << ", point " << i << ": " << portable[static_cast<std::size_t>(i)]
+              << " against " << wide[static_cast<std::size_t>(i)];
+      }
+      for (int i = 0; i < n; ++i) {
+        const Vec3 w(px[i], py[i], pz[i]);
+        const double want = sweep::detail::prism_distance(*pp, w);
+        ASSERT_EQ(0, std::memcmp(&want, &portable[static_cast<std::size_t>(i)], sizeof want));
+        inside += want < 0;
+        outside += want > 0;
+        boxed += want > 0 && want * want == sweep::detail::box_distance2(pp->bounds, w);
       }
     }
   }
@@ -477,6 +492,118 @@ TEST(VoxelKernels, BallLineDistancesGiveThePortableBits) {
   EXPECT_GT(parallelogram, 0);
   EXPECT_GT(framed, 0);
   EXPECT_GT(lowered, 10000);
+}
+
+namespace {
+// 64 random points in `box`, and random bars (distances so far: none yet,
+// deep, shallow or outside) and needs.
+struct Bars64 {
+  std::array<double, 64> px{}, py{}, pz{}, d{}, need{};
+  std::uint64_t bits = 0;
+};
+Bars64 random_bars(const Aabb& box, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  Bars64 b;
+  const double span = (box.max - box.min).maxCoeff();
+  for (std::size_t i = 0; i < 64; ++i) {
+    b.px[i] = box.min.x() + u(rng) * (box.max.x() - box.min.x());
+    b.py[i] = box.min.y() + u(rng) * (box.max.y() - box.min.y());
+    b.pz[i] = box.min.z() + u(rng) * (box.max.z() - box.min.z());
+    b.d[i] = rng() % 3 == 0 ? std::numeric_limits<double>::infinity() : span * (u(rng) - 0.7);
+    b.need[i] = span * (u(rng) - 0.3);
+  }
+  b.bits = rng() | rng();  // about three in four
+  return b;
+}
+}  // namespace
+
+// A profile prism's and a joint's lowering of the bars four at a time
+// (lower_by_prism, lower_by_joint) against their portable versions, to the
+// bit, and those against the pieces' distances: a prism lowers a bar to
+// its distance where that is less; a joint sets it to its distance where
+// that is below the bar, the need and zero (the portable version stops
+// once a part reaches that, and the wide one works out the whole).
+TEST(VoxelKernels, PrismAndJointLoweringGiveThePortableBits) {
+  std::mt19937_64 rng(23);
+  int lowered = 0, untouched = 0, pieces = 0;
+  auto check = [&](const auto& piece, const Aabb& box, auto portable_fn, auto dispatched_fn, auto wide_fn, auto want_fn) {
+    ++pieces;
+    for (int trial = 0; trial < 300; ++trial) {
+      const Bars64 b = random_bars(box, rng);
+      std::array<double, 64> portable = b.d, dispatched = b.d, wide = b.d;
+      portable_fn(piece, b, portable.data());
+      dispatched_fn(piece, b, dispatched.data());
+      ASSERT_EQ(0, std::memcmp(portable.data(), dispatched.data(), sizeof portable)) << "trial " << trial;
+      if (stock::detail::cpu_has_avx2()) {
+        wide_fn(piece, b, wide.data());
+        ASSERT_EQ(0, std::memcmp(portable.data(), wide.data(), sizeof portable)) << "trial " << trial;
+      }
+      for (std::size_t i = 0; i < 64; ++i) {
+        const double want = (b.bits >> i) & 1 ? want_fn(piece, b, i) : b.d[i];
+        ASSERT_EQ(0, std::memcmp(&want, &portable[i], sizeof want)) << "voxel " << i << ": " << want << " against " << portable[i];
+        (portable[i] != b.d[i] ? lowered : untouched) += 1;
+      }
+    }
+  };
+  // Prisms: the profile prisms' moves and the snowflake's tool.
+  for (const KernelPrism& kp : kernel_prisms()) {
+    const sweep::ProfilePrim* pp = &kp.prism;
+    check(
+        *pp, pp->bounds.expanded(0.02),
+        [](const auto& q, const Bars64& b, double* d) { stock::detail::lower_by_prism_scalar(q, b.bits, b.px.data(), b.py.data(), b.pz.data(), d); },
+        [](const auto& q, const Bars64& b, double* d) { stock::detail::lower_by_prism(q, b.bits, b.px.data(), b.py.data(), b.pz.data(), d); },
+        [](const auto& q, const Bars64& b, double* d) { stock::detail::lower_by_prism_avx2(q, b.bits, b.px.data(), b.py.data(), b.pz.data(), d); },
+        [](const auto& q, const Bars64& b, std::size_t i) {
+          return std::min(b.d[i], sweep::detail::prism_distance(q, Vec3(b.px[i], b.py[i], b.pz[i])));
+        });
+  }
+  const int prism_pieces = pieces;
+  // Joints: a V and a round nose along a valley (with and without the
+  // prisms before and after), against the cutting direction, and crests.
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  const std::vector<Vec3> valley = {Vec3(0, 0, 0.004), Vec3(0.004, 0, 0.001), Vec3(0.008, 0, 0), Vec3(0.012, 0, 0.002)};
+  const std::vector<Vec3> back = {Vec3(0.012, 0, 0.002), Vec3(0.008, 0, 0), Vec3(0.004, 0, 0.001), Vec3(0, 0, 0.004)};
+  const std::vector<Vec3> crest = {Vec3(0, 0, 0), Vec3(0.004, 0, 0.003), Vec3(0.008, 0, 0.0035), Vec3(0.012, 0, 0.001)};
+  int crests = 0;
+  for (const char* spec : {"vtool:angle=90,h=0.05", "nose:r=0.5,angle=100"}) {
+    const tool::Tool t = tool::parse_tool_spec(spec, "test");
+    for (const auto* path : {&valley, &back, &crest}) {
+      std::vector<sweep::ProfilePrim> pp;
+      for (std::size_t i = 0; i + 1 < path->size(); ++i)
+        pp.push_back(std::get<sweep::ProfilePrim>(sweep::sweep_line((*path)[i], (*path)[i + 1], I, t).prims[0]));
+      std::vector<sweep::JointPrim> joints;
+      for (std::size_t mid = 0; mid < pp.size(); ++mid)
+        if (auto j = sweep::joint_prim(mid > 0 ? &pp[mid - 1] : nullptr, pp[mid], mid + 1 < pp.size() ? &pp[mid + 1] : nullptr,
+                                       0.001, Aabb{}))
+          joints.push_back(*j);
+      for (std::size_t k = 0; k + 1 < pp.size(); ++k)
+        if (auto c = sweep::crest_prim(pp[k], pp[k + 1], 0.001, Aabb{})) joints.push_back(*c);
+      for (const sweep::JointPrim& jp : joints) {
+        crests += jp.crest;
+        check(
+            jp, jp.bounds.expanded(0.002),
+            [](const auto& q, const Bars64& b, double* d) {
+              stock::detail::lower_by_joint_scalar(q, b.bits, b.px.data(), b.py.data(), b.pz.data(), b.need.data(), d);
+            },
+            [](const auto& q, const Bars64& b, double* d) {
+              stock::detail::lower_by_joint(q, b.bits, b.px.data(), b.py.data(), b.pz.data(), b.need.data(), d);
+            },
+            [](const auto& q, const Bars64& b, double* d) {
+              stock::detail::lower_by_joint_avx2(q, b.bits, b.px.data(), b.py.data(), b.pz.data(), b.need.data(), d);
+            },
+            [](const auto& q, const Bars64& b, std::size_t i) {
+              const double lim = std::min(std::min(b.d[i], b.need[i]), 0.0);
+              const double dj = sweep::detail::joint_distance(q, Vec3(b.px[i], b.py[i], b.pz[i]));
+              return dj < lim ? dj : b.d[i];
+            });
+      }
+    }
+  }
+  EXPECT_EQ(prism_pieces, 6);
+  EXPECT_GT(pieces - prism_pieces, 12);
+  EXPECT_GT(crests, 1);
+  EXPECT_GT(lowered, 20000);
+  EXPECT_GT(untouched, 20000);
 }
 
 }  // namespace cutsim::test

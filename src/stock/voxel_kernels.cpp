@@ -303,76 +303,112 @@ void prism_distances_scalar(const sweep::ProfilePrim& pp, int from, int n, const
 }
 
 #if defined(__x86_64__)
+namespace {
+
+// sweep::detail::prism_section on four points (y, z) in a prism's plane:
+// the profile's two cases (nearest the nose's centre, or a side face) each
+// worked out where one of the four needs it and the right one picked,
+// with the lean's factors of the move `d` (f_side, f_top: the piece's).
+[[gnu::target("avx2")]] inline __m256d prism_section_avx2(const tool::EdgeProfile& e, double sin_half, double cos_half,
+                                                          const Vec3& d, const double (&f_side)[2], double f_top,
+                                                          __m256d y, __m256d z) {
+  const __m256d zero = _mm256_setzero_pd();
+  const __m256d sb = _mm256_set1_pd(sin_half), cb = _mm256_set1_pd(cos_half), nose = _mm256_set1_pd(e.nose_radius);
+  const __m256d a = abs_avx2(y), b = _mm256_sub_pd(z, nose);
+  const __m256d round = _mm256_cmp_pd(_mm256_add_pd(_mm256_mul_pd(a, sb), _mm256_mul_pd(b, cb)), zero, _CMP_LE_OQ);
+  __m256d af;
+  {
+    // A side face: (r - nose) f_side[y < 0]
+    const __m256d r = _mm256_sub_pd(_mm256_mul_pd(a, cb), _mm256_mul_pd(b, sb));
+    const __m256d f = _mm256_blendv_pd(_mm256_set1_pd(f_side[0]), _mm256_set1_pd(f_side[1]), _mm256_cmp_pd(y, zero, _CMP_LT_OQ));
+    af = _mm256_mul_pd(_mm256_sub_pd(r, nose), f);
+  }
+  if (_mm256_movemask_pd(round)) {
+    // Nearest the nose's centre: r = hypot2(a, b), factor ax r / hypot2(ax r, y d.y + b d.z)
+    // (where r = 0: prism_factor(ax, -d.z), the piece's)
+    const __m256d ax = _mm256_set1_pd(std::fabs(d.x()));
+    const __m256d r = _mm256_sqrt_pd(_mm256_add_pd(_mm256_mul_pd(a, a), _mm256_mul_pd(b, b)));
+    const __m256d t1 = _mm256_mul_pd(ax, r);
+    const __m256d t2 = _mm256_add_pd(_mm256_mul_pd(y, _mm256_set1_pd(d.y())), _mm256_mul_pd(b, _mm256_set1_pd(d.z())));
+    const __m256d h = _mm256_sqrt_pd(_mm256_add_pd(_mm256_mul_pd(t1, t1), _mm256_mul_pd(t2, t2)));
+    const __m256d f_axis = _mm256_set1_pd(sweep::detail::prism_factor(std::fabs(d.x()), -d.z()));
+    const __m256d f = _mm256_blendv_pd(f_axis, _mm256_div_pd(t1, h), _mm256_cmp_pd(r, zero, _CMP_GT_OQ));
+    af = _mm256_blendv_pd(af, _mm256_mul_pd(_mm256_sub_pd(r, nose), f), round);
+  }
+  return std_max_avx2(af, _mm256_mul_pd(_mm256_sub_pd(z, _mm256_set1_pd(e.height)), _mm256_set1_pd(f_top)));
+}
+
+// sweep::detail::prism_sd(a, b): the hypot of the positive parts plus min(max(a, b), 0).
+[[gnu::target("avx2")]] inline __m256d prism_sd_avx2(__m256d a, __m256d b) {
+  const __m256d zero = _mm256_setzero_pd();
+  const __m256d ao = std_max_avx2(a, zero), bo = std_max_avx2(b, zero);
+  return _mm256_add_pd(_mm256_sqrt_pd(_mm256_add_pd(_mm256_mul_pd(ao, ao), _mm256_mul_pd(bo, bo))),
+                       std_min_avx2(std_max_avx2(a, b), zero));
+}
+
+// sweep::detail::prism_distance at four world points.
+[[gnu::target("avx2")]] inline __m256d prism_distance_avx2(const sweep::ProfilePrim& pp, __m256d wx, __m256d wy, __m256d wz) {
+  const Eigen::Matrix3d& m = pp.to_local;
+  const Vec3& d = pp.d_local;
+  const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0);
+  // sweep::detail::to_frame
+  const __m256d rx = _mm256_sub_pd(wx, _mm256_set1_pd(pp.origin.x())), ry = _mm256_sub_pd(wy, _mm256_set1_pd(pp.origin.y())),
+                rz = _mm256_sub_pd(wz, _mm256_set1_pd(pp.origin.z()));
+  const __m256d qx = frame_row_avx2(m, 0, rx, ry, rz), qy = frame_row_avx2(m, 1, rx, ry, rz),
+                qz = frame_row_avx2(m, 2, rx, ry, rz);
+  // s = clamp01(px inv_dx): 0 below 0, 1 above 1, else t
+  __m256d s = _mm256_mul_pd(qx, _mm256_set1_pd(pp.inv_dx));
+  s = _mm256_blendv_pd(s, one, _mm256_cmp_pd(s, one, _CMP_GT_OQ));
+  s = _mm256_blendv_pd(s, zero, _mm256_cmp_pd(s, zero, _CMP_LT_OQ));
+  const __m256d y = _mm256_sub_pd(qy, _mm256_mul_pd(s, _mm256_set1_pd(d.y()))),
+                z = _mm256_sub_pd(qz, _mm256_mul_pd(s, _mm256_set1_pd(d.z())));
+  const __m256d sec = prism_section_avx2(pp.edge, pp.sin_half, pp.cos_half, d, pp.f_side, pp.f_top, y, z);
+  // The way past the nearer end along the move.
+  const __m256d dxv = _mm256_set1_pd(d.x());
+  const __m256d along = d.x() > 0 ? std_max_avx2(_mm256_xor_pd(qx, _mm256_set1_pd(-0.0)), _mm256_sub_pd(qx, dxv))
+                                  : std_max_avx2(qx, _mm256_sub_pd(dxv, qx));
+  const __m256d inside_min = std_min_avx2(std_max_avx2(sec, along), zero);
+  // Within the length (and not a tiny positive a): max(a, 0) + min(max(a, b), 0)
+  const __m256d pos = _mm256_cmp_pd(sec, zero, _CMP_GT_OQ);
+  const __m256d short_way = _mm256_andnot_pd(_mm256_and_pd(pos, _mm256_cmp_pd(sec, _mm256_set1_pd(1e-150), _CMP_LT_OQ)),
+                                             _mm256_cmp_pd(along, zero, _CMP_LE_OQ));
+  const __m256d within = _mm256_add_pd(_mm256_blendv_pd(zero, sec, pos), inside_min);
+  // Else prism_sd(a, b).
+  __m256d r = _mm256_blendv_pd(prism_sd_avx2(sec, along), within, short_way);
+  // Outside, no less than the way to the piece's box.
+  const __m256d outside = _mm256_cmp_pd(r, zero, _CMP_GT_OQ);
+  if (_mm256_movemask_pd(outside)) {
+    const __m256d b2 = box_distance2_avx2(wx, wy, wz, pp.bounds);
+    const __m256d farther = _mm256_and_pd(outside, _mm256_cmp_pd(b2, _mm256_mul_pd(r, r), _CMP_GT_OQ));
+    r = _mm256_blendv_pd(r, _mm256_sqrt_pd(b2), farther);
+  }
+  return r;
+}
+
+// Up to four of the voxels in `bits` (taken from it), their places in
+// `at` (the last repeated to fill four) and their centres.
+struct Gathered {
+  std::array<std::size_t, 4> at;
+  std::size_t n = 0;
+  __m256d x, y, z;
+};
+[[gnu::target("avx2")]] inline Gathered gather4(std::uint64_t& bits, const double* px, const double* py, const double* pz) {
+  Gathered g;
+  for (; bits != 0 && g.n < 4; bits &= bits - 1) g.at[g.n++] = static_cast<std::size_t>(std::countr_zero(bits));
+  for (std::size_t j = g.n; j < 4; ++j) g.at[j] = g.at[g.n - 1];  // (repeats: the same value again)
+  g.x = _mm256_set_pd(px[g.at[3]], px[g.at[2]], px[g.at[1]], px[g.at[0]]);
+  g.y = _mm256_set_pd(py[g.at[3]], py[g.at[2]], py[g.at[1]], py[g.at[0]]);
+  g.z = _mm256_set_pd(pz[g.at[3]], pz[g.at[2]], pz[g.at[1]], pz[g.at[0]]);
+  return g;
+}
+
+}  // namespace
 
 [[gnu::target("avx2")]] void prism_distances_avx2(const sweep::ProfilePrim& pp, int n, const double* px,
                                                   const double* py, const double* pz, double* out) {
-  const Eigen::Matrix3d& m = pp.to_local;
-  const Vec3& d = pp.d_local;
-  const tool::EdgeProfile& e = pp.edge;
-  const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0);
-  const __m256d dy = _mm256_set1_pd(d.y()), dz = _mm256_set1_pd(d.z()), dxv = _mm256_set1_pd(d.x());
-  const __m256d sb = _mm256_set1_pd(pp.sin_half), cb = _mm256_set1_pd(pp.cos_half);
-  const __m256d nose = _mm256_set1_pd(e.nose_radius), ax = _mm256_set1_pd(std::fabs(d.x()));
-  // (the round case's factor where r = 0: the piece's)
-  const __m256d f_axis = _mm256_set1_pd(sweep::detail::prism_factor(std::fabs(d.x()), -d.z()));
-  const __m256d tiny = _mm256_set1_pd(1e-150);
   int i = 0;
-  for (; i + 4 <= n; i += 4) {
-    const __m256d wx = _mm256_loadu_pd(px + i), wy = _mm256_loadu_pd(py + i), wz = _mm256_loadu_pd(pz + i);
-    // sweep::detail::to_frame
-    const __m256d rx = _mm256_sub_pd(wx, _mm256_set1_pd(pp.origin.x())),
-                  ry = _mm256_sub_pd(wy, _mm256_set1_pd(pp.origin.y())),
-                  rz = _mm256_sub_pd(wz, _mm256_set1_pd(pp.origin.z()));
-    const __m256d qx = frame_row_avx2(m, 0, rx, ry, rz), qy = frame_row_avx2(m, 1, rx, ry, rz),
-                  qz = frame_row_avx2(m, 2, rx, ry, rz);
-    // s = clamp01(px inv_dx): 0 below 0, 1 above 1, else t
-    __m256d s = _mm256_mul_pd(qx, _mm256_set1_pd(pp.inv_dx));
-    s = _mm256_blendv_pd(s, one, _mm256_cmp_pd(s, one, _CMP_GT_OQ));
-    s = _mm256_blendv_pd(s, zero, _mm256_cmp_pd(s, zero, _CMP_LT_OQ));
-    const __m256d y = _mm256_sub_pd(qy, _mm256_mul_pd(s, dy)), z = _mm256_sub_pd(qz, _mm256_mul_pd(s, dz));
-    // sweep::detail::prism_section: tool::profile_cases with its factors
-    const __m256d a = abs_avx2(y), b = _mm256_sub_pd(z, nose);
-    const __m256d round = _mm256_cmp_pd(_mm256_add_pd(_mm256_mul_pd(a, sb), _mm256_mul_pd(b, cb)), zero, _CMP_LE_OQ);
-    __m256d af;
-    {
-      // A side face: (r - nose) f_side[y < 0]
-      const __m256d r = _mm256_sub_pd(_mm256_mul_pd(a, cb), _mm256_mul_pd(b, sb));
-      const __m256d f = _mm256_blendv_pd(_mm256_set1_pd(pp.f_side[0]), _mm256_set1_pd(pp.f_side[1]),
-                                         _mm256_cmp_pd(y, zero, _CMP_LT_OQ));
-      af = _mm256_mul_pd(_mm256_sub_pd(r, nose), f);
-    }
-    if (_mm256_movemask_pd(round)) {
-      // Nearest the nose's centre: r = hypot2(a, b), factor ax r / hypot2(ax r, y d.y + b d.z)
-      const __m256d r = _mm256_sqrt_pd(_mm256_add_pd(_mm256_mul_pd(a, a), _mm256_mul_pd(b, b)));
-      const __m256d t1 = _mm256_mul_pd(ax, r);
-      const __m256d t2 = _mm256_add_pd(_mm256_mul_pd(y, dy), _mm256_mul_pd(b, dz));
-      const __m256d h = _mm256_sqrt_pd(_mm256_add_pd(_mm256_mul_pd(t1, t1), _mm256_mul_pd(t2, t2)));
-      const __m256d f = _mm256_blendv_pd(f_axis, _mm256_div_pd(t1, h), _mm256_cmp_pd(r, zero, _CMP_GT_OQ));
-      af = _mm256_blendv_pd(af, _mm256_mul_pd(_mm256_sub_pd(r, nose), f), round);
-    }
-    const __m256d sec = std_max_avx2(af, _mm256_mul_pd(_mm256_sub_pd(z, _mm256_set1_pd(e.height)), _mm256_set1_pd(pp.f_top)));
-    // The way past the nearer end along the move.
-    const __m256d along = d.x() > 0 ? std_max_avx2(_mm256_xor_pd(qx, _mm256_set1_pd(-0.0)), _mm256_sub_pd(qx, dxv))
-                                    : std_max_avx2(qx, _mm256_sub_pd(dxv, qx));
-    const __m256d inside_min = std_min_avx2(std_max_avx2(sec, along), zero);
-    // Within the length (and not a tiny positive a): max(a, 0) + min(max(a, b), 0)
-    const __m256d pos = _mm256_cmp_pd(sec, zero, _CMP_GT_OQ);
-    const __m256d short_way = _mm256_andnot_pd(_mm256_and_pd(pos, _mm256_cmp_pd(sec, tiny, _CMP_LT_OQ)),
-                                               _mm256_cmp_pd(along, zero, _CMP_LE_OQ));
-    const __m256d within = _mm256_add_pd(_mm256_blendv_pd(zero, sec, pos), inside_min);
-    // Else prism_sd(a, b): hypot of the positive parts, plus the same min.
-    const __m256d ao = std_max_avx2(sec, zero), bo = std_max_avx2(along, zero);
-    const __m256d sd = _mm256_add_pd(_mm256_sqrt_pd(_mm256_add_pd(_mm256_mul_pd(ao, ao), _mm256_mul_pd(bo, bo))), inside_min);
-    __m256d r = _mm256_blendv_pd(sd, within, short_way);
-    // Outside, no less than the way to the piece's box.
-    const __m256d outside = _mm256_cmp_pd(r, zero, _CMP_GT_OQ);
-    if (_mm256_movemask_pd(outside)) {
-      const __m256d b2 = box_distance2_avx2(wx, wy, wz, pp.bounds);
-      const __m256d farther = _mm256_and_pd(outside, _mm256_cmp_pd(b2, _mm256_mul_pd(r, r), _CMP_GT_OQ));
-      r = _mm256_blendv_pd(r, _mm256_sqrt_pd(b2), farther);
-    }
-    _mm256_storeu_pd(out + i, r);
-  }
+  for (; i + 4 <= n; i += 4)
+    _mm256_storeu_pd(out + i, prism_distance_avx2(pp, _mm256_loadu_pd(px + i), _mm256_loadu_pd(py + i), _mm256_loadu_pd(pz + i)));
   prism_distances_scalar(pp, i, n, px, py, pz, out);
 }
 #else
@@ -386,6 +422,129 @@ void prism_distances(const sweep::ProfilePrim& pp, int n, const double* px, cons
                      double* out) {
   if (avx2()) prism_distances_avx2(pp, n, px, py, pz, out);
   else prism_distances_scalar(pp, 0, n, px, py, pz, out);
+}
+
+// A profile prism, or a joint, lowering the nearest distance so far at
+// the bars in `bits` (the stock update's pieces that are 1-Lipschitz, where
+// no plane bounds them). With AVX2 four at a time, each distance in the
+// portable version's operations, so each value is the same to the bit. A
+// joint's distance is worked out whole, where the portable version stops
+// once a part reaches the voxel's limit: it then only keeps a bound, which
+// the voxel does not take either way.
+void lower_by_prism_scalar(const sweep::ProfilePrim& pp, std::uint64_t bits, const double* px, const double* py,
+                           const double* pz, double* d) {
+  for (; bits != 0; bits &= bits - 1) {
+    const auto b = static_cast<std::size_t>(std::countr_zero(bits));
+    d[b] = std::min(d[b], sweep::detail::prism_distance(pp, Vec3(px[b], py[b], pz[b])));
+  }
+}
+
+void lower_by_joint_scalar(const sweep::JointPrim& jp, std::uint64_t bits, const double* px, const double* py,
+                           const double* pz, const double* need, double* d) {
+  for (; bits != 0; bits &= bits - 1) {
+    const auto b = static_cast<std::size_t>(std::countr_zero(bits));
+    const double lim = std::min(std::min(d[b], need[b]), 0.0);
+    const double dj = sweep::detail::joint_distance_below(jp, Vec3(px[b], py[b], pz[b]), lim);
+    if (dj < lim) d[b] = dj;  // (else only a bound)
+  }
+}
+
+#if defined(__x86_64__)
+namespace {
+
+// sweep::detail::joint_part on four points.
+[[gnu::target("avx2")]] inline __m256d joint_part_avx2(const sweep::JointPrim& jp, const sweep::JointPrim::Side& sd,
+                                                       __m256d wx, __m256d wy, __m256d wz, bool start_cap, bool end_cap) {
+  const Eigen::Matrix3d& m = jp.to_local;
+  const __m256d rx = _mm256_sub_pd(wx, _mm256_set1_pd(sd.origin.x())), ry = _mm256_sub_pd(wy, _mm256_set1_pd(sd.origin.y())),
+                rz = _mm256_sub_pd(wz, _mm256_set1_pd(sd.origin.z()));
+  const __m256d x = frame_row_avx2(m, 0, rx, ry, rz), y = frame_row_avx2(m, 1, rx, ry, rz), z = frame_row_avx2(m, 2, rx, ry, rz);
+  __m256d s = _mm256_mul_pd(x, _mm256_set1_pd(sd.inv_dx));
+  if (start_cap) s = std_max_avx2(s, _mm256_setzero_pd());
+  if (end_cap) s = std_min_avx2(s, _mm256_set1_pd(1.0));
+  const __m256d a = prism_section_avx2(jp.edge, jp.sin_half, jp.cos_half, sd.d, sd.f_side, sd.f_top,
+                                       _mm256_sub_pd(y, _mm256_mul_pd(s, _mm256_set1_pd(sd.d.y()))),
+                                       _mm256_sub_pd(z, _mm256_mul_pd(s, _mm256_set1_pd(sd.d.z()))));
+  if (!start_cap && !end_cap) return a;
+  const __m256d start = _mm256_mul_pd(_mm256_set1_pd(-jp.sign), x);
+  const __m256d end = _mm256_mul_pd(_mm256_set1_pd(jp.sign), _mm256_sub_pd(x, _mm256_set1_pd(sd.d.x())));
+  const __m256d b = start_cap && end_cap ? std_max_avx2(start, end) : start_cap ? start : end;
+  return prism_sd_avx2(a, b);
+}
+
+// sweep::detail::joint_distance (no limit) on four points.
+[[gnu::target("avx2")]] inline __m256d joint_distance_avx2(const sweep::JointPrim& jp, __m256d wx, __m256d wy, __m256d wz) {
+  const Aabb& bx = jp.bounds;
+  const __m256d om = std_max_avx2(
+      std_max_avx2(std_max_avx2(_mm256_sub_pd(_mm256_set1_pd(bx.min.x()), wx), _mm256_sub_pd(wx, _mm256_set1_pd(bx.max.x()))),
+                   std_max_avx2(_mm256_sub_pd(_mm256_set1_pd(bx.min.y()), wy), _mm256_sub_pd(wy, _mm256_set1_pd(bx.max.y())))),
+      std_max_avx2(_mm256_sub_pd(_mm256_set1_pd(bx.min.z()), wz), _mm256_sub_pd(wz, _mm256_set1_pd(bx.max.z()))));
+  __m256d g = om;
+  const __m256d out = _mm256_cmp_pd(om, _mm256_setzero_pd(), _CMP_GT_OQ);  // (not om <= 0)
+  if (_mm256_movemask_pd(out)) g = _mm256_blendv_pd(om, _mm256_sqrt_pd(box_distance2_avx2(wx, wy, wz, bx)), out);
+  const __m256d rx = _mm256_sub_pd(wx, _mm256_set1_pd(jp.mid.origin.x())),
+                ry = _mm256_sub_pd(wy, _mm256_set1_pd(jp.mid.origin.y())),
+                rz = _mm256_sub_pd(wz, _mm256_set1_pd(jp.mid.origin.z()));
+  const __m256d along = _mm256_mul_pd(_mm256_set1_pd(jp.sign), frame_row_avx2(jp.to_local, 0, rx, ry, rz));
+  g = std_max_avx2(g, std_max_avx2(_mm256_sub_pd(_mm256_set1_pd(jp.slab_lo), along),
+                                   _mm256_sub_pd(along, _mm256_set1_pd(jp.slab_hi))));  // the slab
+  if (jp.crest) {
+    // max(g, min(a, after)) is g where a <= g (the portable version's early return).
+    const __m256d a = joint_part_avx2(jp, jp.mid, wx, wy, wz, true, false);
+    return std_max_avx2(g, std_min_avx2(a, joint_part_avx2(jp, jp.after, wx, wy, wz, false, true)));
+  }
+  g = std_max_avx2(g, joint_part_avx2(jp, jp.mid, wx, wy, wz, !jp.has_before, !jp.has_after));
+  if (jp.has_before) g = std_max_avx2(g, joint_part_avx2(jp, jp.before, wx, wy, wz, true, false));
+  if (jp.has_after) g = std_max_avx2(g, joint_part_avx2(jp, jp.after, wx, wy, wz, false, true));
+  return g;
+}
+
+}  // namespace
+
+[[gnu::target("avx2")]] void lower_by_prism_avx2(const sweep::ProfilePrim& pp, std::uint64_t bits, const double* px,
+                                                 const double* py, const double* pz, double* d) {
+  while (bits != 0) {
+    const Gathered w = gather4(bits, px, py, pz);
+    std::array<double, 4> dist;
+    _mm256_storeu_pd(dist.data(), prism_distance_avx2(pp, w.x, w.y, w.z));
+    for (std::size_t j = 0; j < w.n; ++j) d[w.at[j]] = std::min(d[w.at[j]], dist[j]);
+  }
+}
+
+[[gnu::target("avx2")]] void lower_by_joint_avx2(const sweep::JointPrim& jp, std::uint64_t bits, const double* px,
+                                                 const double* py, const double* pz, const double* need, double* d) {
+  while (bits != 0) {
+    const Gathered w = gather4(bits, px, py, pz);
+    std::array<double, 4> dist;
+    _mm256_storeu_pd(dist.data(), joint_distance_avx2(jp, w.x, w.y, w.z));
+    for (std::size_t j = 0; j < w.n; ++j) {
+      const std::size_t b = w.at[j];
+      const double lim = std::min(std::min(d[b], need[b]), 0.0);
+      if (dist[j] < lim) d[b] = dist[j];
+    }
+  }
+}
+#else
+void lower_by_prism_avx2(const sweep::ProfilePrim& pp, std::uint64_t bits, const double* px, const double* py,
+                         const double* pz, double* d) {
+  lower_by_prism_scalar(pp, bits, px, py, pz, d);
+}
+void lower_by_joint_avx2(const sweep::JointPrim& jp, std::uint64_t bits, const double* px, const double* py,
+                         const double* pz, const double* need, double* d) {
+  lower_by_joint_scalar(jp, bits, px, py, pz, need, d);
+}
+#endif
+
+void lower_by_prism(const sweep::ProfilePrim& pp, std::uint64_t bits, const double* px, const double* py,
+                    const double* pz, double* d) {
+  if (avx2()) lower_by_prism_avx2(pp, bits, px, py, pz, d);
+  else lower_by_prism_scalar(pp, bits, px, py, pz, d);
+}
+
+void lower_by_joint(const sweep::JointPrim& jp, std::uint64_t bits, const double* px, const double* py,
+                    const double* pz, const double* need, double* d) {
+  if (avx2()) lower_by_joint_avx2(jp, bits, px, py, pz, need, d);
+  else lower_by_joint_scalar(jp, bits, px, py, pz, need, d);
 }
 
 // A ball end's line (sweep::detail::ball_line_distance) lowering the
@@ -442,17 +601,11 @@ struct Off4 {
   if (!vertical && lp.inv_lr2 == 0) return lower_by_ball_line_scalar(lp, bits, px, py, pz, d);
   const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0);
   while (bits != 0) {
-    std::array<std::size_t, 4> at;
-    std::size_t n = 0;
-    for (; bits != 0 && n < 4; bits &= bits - 1) at[n++] = static_cast<std::size_t>(std::countr_zero(bits));
-    for (std::size_t j = n; j < 4; ++j) at[j] = at[n - 1];  // (repeats: the same value again)
-    const __m256d wx = _mm256_set_pd(px[at[3]], px[at[2]], px[at[1]], px[at[0]]);
-    const __m256d wy = _mm256_set_pd(py[at[3]], py[at[2]], py[at[1]], py[at[0]]);
-    const __m256d wz = _mm256_set_pd(pz[at[3]], pz[at[2]], pz[at[1]], pz[at[0]]);
+    const Gathered w = gather4(bits, px, py, pz);
     // sweep::detail::to_piece
-    const __m256d rx = _mm256_sub_pd(wx, _mm256_set1_pd(lp.origin.x())),
-                  ry = _mm256_sub_pd(wy, _mm256_set1_pd(lp.origin.y())),
-                  rz = _mm256_sub_pd(wz, _mm256_set1_pd(lp.origin.z()));
+    const __m256d rx = _mm256_sub_pd(w.x, _mm256_set1_pd(lp.origin.x())),
+                  ry = _mm256_sub_pd(w.y, _mm256_set1_pd(lp.origin.y())),
+                  rz = _mm256_sub_pd(w.z, _mm256_set1_pd(lp.origin.z()));
     Off4 p{rx, ry, rz};
     if (!lp.axis_z) {
       const Eigen::Matrix3d& m = lp.to_local;
@@ -494,7 +647,7 @@ struct Off4 {
     }
     std::array<double, 4> dist;
     _mm256_storeu_pd(dist.data(), _mm256_sub_pd(_mm256_sqrt_pd(n2), _mm256_set1_pd(lp.env.corner_radius)));
-    for (std::size_t j = 0; j < n; ++j) d[at[j]] = std::min(d[at[j]], dist[j]);
+    for (std::size_t j = 0; j < w.n; ++j) d[w.at[j]] = std::min(d[w.at[j]], dist[j]);
   }
 }
 #else

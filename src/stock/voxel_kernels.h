@@ -33,6 +33,18 @@ std::uint64_t planes_below(const double* d, const double* need, const double* yx
 void lower_by_ball_line(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
                         const double* pz, double* d);
 
+/// d[b] = min(d[b], sweep::detail::prism_distance(pp, (px, py, pz)[b])) for
+/// the voxels b in `bits`: a profile prism (ProfilePrim::prism) lowering the
+/// nearest distance so far.
+void lower_by_prism(const sweep::ProfilePrim& pp, std::uint64_t bits, const double* px, const double* py,
+                    const double* pz, double* d);
+/// For the voxels b in `bits`, with lim = min(d[b], need[b], 0): d[b] = the
+/// joint's distance (sweep::detail::joint_distance_below) where that is
+/// below lim (a joint's inside only matters; at or above lim the voxel
+/// keeps d[b]).
+void lower_by_joint(const sweep::JointPrim& jp, std::uint64_t bits, const double* px, const double* py,
+                    const double* pz, const double* need, double* d);
+
 /// The voxels b < n (bits) whose nearest distance so far d[b] is not at
 /// or below `floor` and that a piece's box leaves to its distance: those
 /// at squared distance 0 from the box (sweep::detail::box_distance2 at
@@ -90,6 +102,14 @@ void prism_distances_avx2(const sweep::ProfilePrim& pp, int n, const double* px,
                           double* out);
 void lower_by_ball_line_scalar(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
                                const double* pz, double* d);
+void lower_by_prism_scalar(const sweep::ProfilePrim& pp, std::uint64_t bits, const double* px, const double* py,
+                           const double* pz, double* d);
+void lower_by_prism_avx2(const sweep::ProfilePrim& pp, std::uint64_t bits, const double* px, const double* py,
+                         const double* pz, double* d);
+void lower_by_joint_scalar(const sweep::JointPrim& jp, std::uint64_t bits, const double* px, const double* py,
+                           const double* pz, const double* need, double* d);
+void lower_by_joint_avx2(const sweep::JointPrim& jp, std::uint64_t bits, const double* px, const double* py,
+                         const double* pz, const double* need, double* d);
 void lower_by_ball_line_avx2(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
                              const double* pz, double* d);
 
