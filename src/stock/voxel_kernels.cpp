@@ -428,9 +428,10 @@ void prism_distances(const sweep::ProfilePrim& pp, int n, const double* px, cons
 // the bars in `bits` (the stock update's pieces that are 1-Lipschitz, where
 // no plane bounds them). With AVX2 four at a time, each distance in the
 // portable version's operations, so each value is the same to the bit. A
-// joint's distance is worked out whole, where the portable version stops
-// once a part reaches the voxel's limit: it then only keeps a bound, which
-// the voxel does not take either way.
+// joint's four stop once a part has reached every one's limit, where the
+// portable version stops at each voxel's own: a voxel past its limit then
+// keeps a bound (from fewer parts, or the whole distance), which it does
+// not take either way.
 void lower_by_prism_scalar(const sweep::ProfilePrim& pp, std::uint64_t bits, const double* px, const double* py,
                            const double* pz, double* d) {
   for (; bits != 0; bits &= bits - 1) {
@@ -472,8 +473,18 @@ namespace {
   return prism_sd_avx2(a, b);
 }
 
-// sweep::detail::joint_distance (no limit) on four points.
-[[gnu::target("avx2")]] inline __m256d joint_distance_avx2(const sweep::JointPrim& jp, __m256d wx, __m256d wy, __m256d wz) {
+// Whether every one of four values is at or above its limit (none below).
+[[gnu::target("avx2")]] inline bool none_below_avx2(__m256d v, __m256d lim) {
+  return _mm256_movemask_pd(_mm256_cmp_pd(v, lim, _CMP_LT_OQ)) == 0;
+}
+
+// sweep::detail::joint_distance_below on four points, each with its
+// limit: where every one has reached its limit, what the parts so far
+// give (the portable version's bound; it stops at once where it has
+// reached it, so a point that reaches it earlier may have a lower bound
+// here, but no less than its limit), else the whole distance.
+[[gnu::target("avx2")]] inline __m256d joint_distance_avx2(const sweep::JointPrim& jp, __m256d wx, __m256d wy, __m256d wz,
+                                                           __m256d lim) {
   const Aabb& bx = jp.bounds;
   const __m256d om = std_max_avx2(
       std_max_avx2(std_max_avx2(_mm256_sub_pd(_mm256_set1_pd(bx.min.x()), wx), _mm256_sub_pd(wx, _mm256_set1_pd(bx.max.x()))),
@@ -488,12 +499,15 @@ namespace {
   const __m256d along = _mm256_mul_pd(_mm256_set1_pd(jp.sign), frame_row_avx2(jp.to_local, 0, rx, ry, rz));
   g = std_max_avx2(g, std_max_avx2(_mm256_sub_pd(_mm256_set1_pd(jp.slab_lo), along),
                                    _mm256_sub_pd(along, _mm256_set1_pd(jp.slab_hi))));  // the slab
+  if (none_below_avx2(g, lim)) return g;
   if (jp.crest) {
     // max(g, min(a, after)) is g where a <= g (the portable version's early return).
     const __m256d a = joint_part_avx2(jp, jp.mid, wx, wy, wz, true, false);
+    if (none_below_avx2(g, a)) return g;  // (a <= g everywhere)
     return std_max_avx2(g, std_min_avx2(a, joint_part_avx2(jp, jp.after, wx, wy, wz, false, true)));
   }
   g = std_max_avx2(g, joint_part_avx2(jp, jp.mid, wx, wy, wz, !jp.has_before, !jp.has_after));
+  if (none_below_avx2(g, lim)) return g;
   if (jp.has_before) g = std_max_avx2(g, joint_part_avx2(jp, jp.before, wx, wy, wz, true, false));
   if (jp.has_after) g = std_max_avx2(g, joint_part_avx2(jp, jp.after, wx, wy, wz, false, true));
   return g;
@@ -515,13 +529,11 @@ namespace {
                                                  const double* py, const double* pz, const double* need, double* d) {
   while (bits != 0) {
     const Gathered w = gather4(bits, px, py, pz);
-    std::array<double, 4> dist;
-    _mm256_storeu_pd(dist.data(), joint_distance_avx2(jp, w.x, w.y, w.z));
-    for (std::size_t j = 0; j < w.n; ++j) {
-      const std::size_t b = w.at[j];
-      const double lim = std::min(std::min(d[b], need[b]), 0.0);
-      if (dist[j] < lim) d[b] = dist[j];
-    }
+    std::array<double, 4> lim, dist;
+    for (std::size_t j = 0; j < 4; ++j) lim[j] = std::min(std::min(d[w.at[j]], need[w.at[j]]), 0.0);
+    _mm256_storeu_pd(dist.data(), joint_distance_avx2(jp, w.x, w.y, w.z, _mm256_loadu_pd(lim.data())));
+    for (std::size_t j = 0; j < w.n; ++j)
+      if (dist[j] < lim[j]) d[w.at[j]] = dist[j];
   }
 }
 #else
