@@ -299,10 +299,6 @@ SimResult simulate(const SimOptions& opt) {
     res.defaults.notes.push_back("stock: box " + fmt_box(b) + " mm (default: under the cutting moves; set --stock-box)");
   }
   res.stock_box = *stock_box;
-  if (opt.target_bounds && !opt.target_bounds->overlaps(res.stock_box))
-    throw GeometryError(SourceLocation{opt.target_file, 0, 0, {}},
-                        "the target (" + fmt_box(*opt.target_bounds) + " mm) does not overlap the stock (" +
-                            fmt_box(res.stock_box) + " mm): nothing to compare; check its placement ([target] offset)");
   const Vec3 start = opt.job.start_mm ? *opt.job.start_mm : Vec3(0, 0, res.stock_box.max.z() + 10.0);
   if (!opt.job.start_mm) {
     std::ostringstream os;
@@ -398,6 +394,12 @@ SimResult simulate(const SimOptions& opt) {
     amplitude_limits_of(mach, mon, res.amplitude_limits);
   }
   res.timing.parse_s = seconds_since(t_start);
+  // The target (read beside the program's passes), before any grid.
+  if (opt.target_bounds)
+    if (const Aabb tb = opt.target_bounds(); !tb.overlaps(res.stock_box))
+      throw GeometryError(SourceLocation{opt.target_file, 0, 0, {}},
+                          "the target (" + fmt_box(tb) + " mm) does not overlap the stock (" + fmt_box(res.stock_box) +
+                              " mm): nothing to compare; check its placement ([target] offset)");
 
   const auto t_sim = Clock::now();
   if (roi.empty()) {

@@ -62,9 +62,11 @@ struct SimOptions {
   /// How many of the latest held cuts a contact test weighs voxel by voxel
   /// (the results do not depend on it).
   std::size_t latest_cuts = InterferenceChecker::kLatestCuts;
-  /// Bounds of the target, when there is one: a target that misses the
-  /// stock is refused before any grid is built.
-  std::optional<Aabb> target_bounds;
+  /// Bounds of the target, when there is one: called once, after the
+  /// program's passes and before any grid is built (the target may be
+  /// read beside them; what it throws stops the run there). A target
+  /// that misses the stock is refused then.
+  std::function<Aabb()> target_bounds;
   std::string target_file;
   /// Called with the fraction done (0..1) and the NC line being cut.
   std::function<void(double, int)> progress;
