@@ -2,6 +2,7 @@
 // their positions, a mesh with a hole refused, the coloured glb read back.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <random>
 #include <tuple>
 
@@ -227,6 +228,64 @@ TEST(Compare, NearTrianglesAnswerAsTheWholeMesh) {
   EXPECT_GT(found, 10000u);
   EXPECT_GT(smaller, found / 2) << "a smaller ball inside should keep fewer triangles";
   EXPECT_LT(largest, all / 10) << "the near set should be a small part of the mesh";
+}
+
+// The comparison asks an eighth's voxels four at a time
+// (signed_distances_if_within): the same bits as one query each, found or
+// not, on a fine sphere and on a coarse one (whose large facets put many
+// points nearest an edge or a corner, where the sign comes from the
+// pseudonormals), and about the slotted block's edges and corners
+// (concave ones too), for groups of 1 to 4 points about as far apart as an
+// eighth's voxels.
+TEST(Compare, BatchQueriesGiveTheBitsOfOneQueryEach) {
+  std::mt19937 rng(19);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::size_t found = 0, missed = 0, inside = 0;
+  for (int mesh = 0; mesh < 3; ++mesh) {
+    const compare::Target target(mesh == 0 ? uv_sphere(96, 192) : mesh == 1 ? uv_sphere(5, 8) : slotted_block());
+    std::vector<unsigned> near;
+    for (int k = 0; k < 5000; ++k) {
+      Vec3 dir(u(rng), u(rng), u(rng));
+      if (dir.norm() < 0.1) continue;
+      // On the block: along the slot's edges (y +-1 at its floor and its
+      // top) and past the block's ends.
+      const Vec3 c = mesh < 2 ? Vec3(dir.normalized() * (1 + 0.05 * u(rng)))
+                              : Vec3(k % 5 == 0 ? 3 + 3.05 * (u(rng) > 0 ? 1 : -1) : 3 + 2.9 * u(rng),
+                                     (u(rng) > 0 ? 1 : -1) * (1 + 0.05 * u(rng)), (u(rng) > 0 ? 0.0 : -0.1) + 0.05 * u(rng));
+      const double r = 0.01 + 0.02 * (u(rng) + 1), spread = 0.01;
+      target.triangles_near(c, r + 2 * spread, near);
+      const int n = 1 + k % 4;
+      double px[4], py[4], pz[4], portable[4], dispatched[4], wide[4];
+      for (int i = 0; i < n; ++i) {
+        px[i] = c.x() + spread * u(rng);
+        py[i] = c.y() + spread * u(rng);
+        pz[i] = c.z() + spread * u(rng);
+      }
+      target.signed_distances_if_within_scalar(n, px, py, pz, r, near, portable);
+      target.signed_distances_if_within(n, px, py, pz, r, near, dispatched);
+      ASSERT_EQ(0, std::memcmp(portable, dispatched, sizeof(double) * static_cast<std::size_t>(n))) << k;
+      if (__builtin_cpu_supports("avx2")) {
+        target.signed_distances_if_within_avx2(n, px, py, pz, r, near, wide);
+        for (int i = 0; i < n; ++i)
+          ASSERT_EQ(0, std::memcmp(&portable[i], &wide[i], sizeof(double)))
+              << "query " << k << ", point " << i << ": " << portable[i] << " against " << wide[i];
+      }
+      for (int i = 0; i < n; ++i) {
+        const auto one = target.signed_distance_if_within(Vec3(px[i], py[i], pz[i]), r, near);
+        ASSERT_EQ(one.has_value(), !std::isnan(portable[i]));
+        if (!one) {
+          ++missed;
+          continue;
+        }
+        ASSERT_EQ(0, std::memcmp(&*one, &portable[i], sizeof(double)));
+        ++found;
+        inside += *one < 0;
+      }
+    }
+  }
+  EXPECT_GT(found, 15000u);
+  EXPECT_GT(missed, 1000u);
+  EXPECT_GT(inside, 5000u);
 }
 
 // Where every triangle near a ball lies in one plane (the slotted block's

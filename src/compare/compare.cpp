@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -306,6 +307,16 @@ void block_target_distances(const stock::VoxelBlock& b, const Vec3& centre, doub
     sat_q2[qi] = t >= 0 ? t * t : -1.0;
   }
   int unknown = 0;
+  // The voxels that ask for the surface, by their eighth: asked four at a
+  // time (Target::signed_distances_if_within) once the loop has found
+  // them all, each eighth's together (they share its triangles).
+  struct Ask {
+    std::uint16_t i;      // the voxel
+    bool centre_in_ball;  // r2 <= h^2: the centre lies in its empty ball
+  };
+  std::array<std::array<Ask, 8>, 64> asks;
+  std::array<std::uint8_t, 64> n_asks{};
+  std::uint64_t asked = 0;  // eighths with asks
   // (The voxel's place and its offsets from the centres on scalars: built
   // as a Vec3 on the stack, each voxel waited for its two halves to be
   // stored and loaded again, a quarter of this loop's time. The same
@@ -325,14 +336,42 @@ void block_target_distances(const stock::VoxelBlock& b, const Vec3& centre, doub
         } else if (const double qx = px - centre_q[q].x(), qy = py - centre_q[q].y(), qz = pz - centre_q[q].z();
                    qx * qx + qy * qy + qz * qz <= sat_q2[q]) {
           dt[i] = *dq[q] < 0 ? -hf : hf;
-        } else if (const auto d = quarter_far[q] ? std::nullopt
-                                                 : target.signed_distance_if_within(Vec3(px, py, pz), 1.5 * h,
-                                                                                   eighth_near(x, y, z, q))) {
-          dt[i] = static_cast<float>(std::clamp(*d, -h, h));
+        } else if (!quarter_far[q]) {
+          const std::size_t e = (q << 3) | static_cast<std::size_t>((((x >> 1) & 1) << 2) | (((y >> 1) & 1) << 1) | ((z >> 1) & 1));
+          asks[e][n_asks[e]++] = {static_cast<std::uint16_t>(i), r2 <= h * h};
+          asked |= std::uint64_t{1} << e;
         } else if (r2 <= h * h) {
           dt[i] = dc < 0 ? -hf : hf;  // the centre lies in this voxel's empty ball
         } else {
           dt[i] = kUnknown;
+          ++unknown;
+        }
+      }
+    }
+  }
+  for (; asked != 0; asked &= asked - 1) {
+    const auto e = static_cast<std::size_t>(std::countr_zero(asked));
+    // (eighth_near takes a voxel of the eighth: its first.)
+    const int i0 = asks[e][0].i;
+    const std::vector<unsigned>& near = eighth_near(i0 >> 6, (i0 >> 3) & 7, i0 & 7, e >> 3);
+    for (int k0 = 0; k0 < n_asks[e]; k0 += 4) {
+      const int n = std::min(4, n_asks[e] - k0);
+      double ax[4], ay[4], az[4], d[4];
+      for (int k = 0; k < n; ++k) {
+        const int i = asks[e][static_cast<std::size_t>(k0 + k)].i;
+        ax[k] = b.first_center.x() + h * (i >> 6);
+        ay[k] = b.first_center.y() + h * ((i >> 3) & 7);
+        az[k] = b.first_center.z() + h * (i & 7);
+      }
+      target.signed_distances_if_within(n, ax, ay, az, 1.5 * h, near, d);
+      for (int k = 0; k < n; ++k) {
+        const Ask& a = asks[e][static_cast<std::size_t>(k0 + k)];
+        if (!std::isnan(d[k])) {
+          dt[a.i] = static_cast<float>(std::clamp(d[k], -h, h));
+        } else if (a.centre_in_ball) {
+          dt[a.i] = dc < 0 ? -hf : hf;  // the centre lies in this voxel's empty ball
+        } else {
+          dt[a.i] = kUnknown;
           ++unknown;
         }
       }

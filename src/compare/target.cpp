@@ -3,9 +3,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdlib>
+#include <string_view>
 #include <limits>
 
 #include <embree3/rtcore.h>
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
 
 #include "cutsim/core/error.h"
 
@@ -308,6 +313,165 @@ std::optional<double> Target::signed_distance_if_within(const Vec3& p, double ra
   for (const unsigned f : near) impl_->consider(q, f);
   if (q.best2 < limit) return impl_->sign_at(q) * std::sqrt(q.best2);
   return std::nullopt;
+}
+
+void Target::signed_distances_if_within_scalar(int n, const double* px, const double* py, const double* pz,
+                                               double radius, const std::vector<unsigned>& near, double* out) const {
+  for (int i = 0; i < n; ++i) {
+    const auto d = signed_distance_if_within(Vec3(px[i], py[i], pz[i]), radius, near);
+    out[i] = d ? *d : std::numeric_limits<double>::quiet_NaN();
+  }
+}
+
+#if defined(__x86_64__)
+namespace {
+struct V3 {
+  __m256d x, y, z;
+};
+[[gnu::target("avx2")]] inline V3 sub3(const V3& a, const V3& b) {
+  return {_mm256_sub_pd(a.x, b.x), _mm256_sub_pd(a.y, b.y), _mm256_sub_pd(a.z, b.z)};
+}
+// a . b as Eigen sums a 3-vector's: (x + y) + z.
+[[gnu::target("avx2")]] inline __m256d dot3(const V3& a, const V3& b) {
+  return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(a.x, b.x), _mm256_mul_pd(a.y, b.y)), _mm256_mul_pd(a.z, b.z));
+}
+[[gnu::target("avx2")]] inline V3 splat3(const Vec3& v) {
+  return {_mm256_set1_pd(v.x()), _mm256_set1_pd(v.y()), _mm256_set1_pd(v.z())};
+}
+// o + t e, per component.
+[[gnu::target("avx2")]] inline V3 along3(const V3& o, __m256d t, const V3& e) {
+  return {_mm256_add_pd(o.x, _mm256_mul_pd(t, e.x)), _mm256_add_pd(o.y, _mm256_mul_pd(t, e.y)),
+          _mm256_add_pd(o.z, _mm256_mul_pd(t, e.z))};
+}
+// Where `m` is set and nothing is taken yet (`taken`): v, and feature f.
+[[gnu::target("avx2")]] inline void take3(V3& out, __m256d& feature, __m256d& taken, __m256d m, const V3& v, double f) {
+  const __m256d now = _mm256_andnot_pd(taken, m);
+  out.x = _mm256_blendv_pd(out.x, v.x, now);
+  out.y = _mm256_blendv_pd(out.y, v.y, now);
+  out.z = _mm256_blendv_pd(out.z, v.z, now);
+  feature = _mm256_blendv_pd(feature, _mm256_set1_pd(f), now);
+  taken = _mm256_or_pd(taken, now);
+}
+[[gnu::target("avx2")]] inline __m256d le(__m256d a, __m256d b) { return _mm256_cmp_pd(a, b, _CMP_LE_OQ); }
+[[gnu::target("avx2")]] inline __m256d ge(__m256d a, __m256d b) { return _mm256_cmp_pd(a, b, _CMP_GE_OQ); }
+
+// closest_on_triangle on four points: every region's point, the first
+// region (in the portable version's order) each point is in taken.
+[[gnu::target("avx2")]] inline V3 closest_on_triangle4(const V3& p, const Vec3& av, const Vec3& bv, const Vec3& cv,
+                                                        __m256d& feature) {
+  const __m256d zero = _mm256_setzero_pd();
+  const V3 a = splat3(av), b = splat3(bv), c = splat3(cv);
+  const V3 ab = splat3(bv - av), ac = splat3(cv - av);
+  const V3 ap = sub3(p, a);
+  const __m256d d1 = dot3(ab, ap), d2 = dot3(ac, ap);
+  V3 out{zero, zero, zero};
+  __m256d taken = zero;
+  feature = zero;
+  take3(out, feature, taken, _mm256_and_pd(le(d1, zero), le(d2, zero)), a, 1);
+  const V3 bp = sub3(p, b);
+  const __m256d d3 = dot3(ab, bp), d4 = dot3(ac, bp);
+  take3(out, feature, taken, _mm256_and_pd(ge(d3, zero), le(d4, d3)), b, 2);
+  const __m256d vc = _mm256_sub_pd(_mm256_mul_pd(d1, d4), _mm256_mul_pd(d3, d2));
+  take3(out, feature, taken, _mm256_and_pd(_mm256_and_pd(le(vc, zero), ge(d1, zero)), le(d3, zero)),
+        along3(a, _mm256_div_pd(d1, _mm256_sub_pd(d1, d3)), ab), 4);
+  const V3 cp = sub3(p, c);
+  const __m256d d5 = dot3(ab, cp), d6 = dot3(ac, cp);
+  take3(out, feature, taken, _mm256_and_pd(ge(d6, zero), le(d5, d6)), c, 3);
+  const __m256d vb = _mm256_sub_pd(_mm256_mul_pd(d5, d2), _mm256_mul_pd(d1, d6));
+  take3(out, feature, taken, _mm256_and_pd(_mm256_and_pd(le(vb, zero), ge(d2, zero)), le(d6, zero)),
+        along3(a, _mm256_div_pd(d2, _mm256_sub_pd(d2, d6)), ac), 6);
+  const __m256d va = _mm256_sub_pd(_mm256_mul_pd(d3, d6), _mm256_mul_pd(d5, d4));
+  const __m256d e43 = _mm256_sub_pd(d4, d3), e56 = _mm256_sub_pd(d5, d6);
+  take3(out, feature, taken, _mm256_and_pd(_mm256_and_pd(le(va, zero), ge(e43, zero)), ge(e56, zero)),
+        along3(b, _mm256_div_pd(e43, _mm256_add_pd(e43, e56)), splat3(cv - bv)), 5);
+  const __m256d denom = _mm256_div_pd(_mm256_set1_pd(1.0), _mm256_add_pd(_mm256_add_pd(va, vb), vc));
+  take3(out, feature, taken, _mm256_castsi256_pd(_mm256_set1_epi64x(-1)),
+        along3(along3(a, _mm256_mul_pd(vb, denom), ab), _mm256_mul_pd(vc, denom), ac), 0);
+  return out;
+}
+}  // namespace
+
+[[gnu::target("avx2")]] void Target::signed_distances_if_within_avx2(int n, const double* px, const double* py,
+                                                                     const double* pz, double radius,
+                                                                     const std::vector<unsigned>& near,
+                                                                     double* out) const {
+  const Impl& m = *impl_;
+  double x[4], y[4], z[4];
+  for (int i = 0; i < 4; ++i) {
+    const int j = i < n ? i : n - 1;  // (repeats: the same query again)
+    x[i] = px[j];
+    y[i] = py[j];
+    z[i] = pz[j];
+  }
+  const V3 p{_mm256_loadu_pd(x), _mm256_loadu_pd(y), _mm256_loadu_pd(z)};
+  const double limit = radius * radius;
+  __m256d best2 = _mm256_set1_pd(limit), feature = _mm256_setzero_pd();
+  __m256i prim = _mm256_setzero_si256();
+  V3 closest{_mm256_setzero_pd(), _mm256_setzero_pd(), _mm256_setzero_pd()};
+  const __m256d zero = _mm256_setzero_pd();
+  for (const unsigned f : near) {
+    // Impl::consider: the triangle's box first (below the best so far), then the triangle.
+    const Aabb& b = m.face_box[f];
+    // (min - p).cwiseMax(p - max).cwiseMax(0).squaredNorm()
+    const __m256d gx = _mm256_max_pd(_mm256_max_pd(_mm256_sub_pd(_mm256_set1_pd(b.min.x()), p.x), _mm256_sub_pd(p.x, _mm256_set1_pd(b.max.x()))), zero);
+    const __m256d gy = _mm256_max_pd(_mm256_max_pd(_mm256_sub_pd(_mm256_set1_pd(b.min.y()), p.y), _mm256_sub_pd(p.y, _mm256_set1_pd(b.max.y()))), zero);
+    const __m256d gz = _mm256_max_pd(_mm256_max_pd(_mm256_sub_pd(_mm256_set1_pd(b.min.z()), p.z), _mm256_sub_pd(p.z, _mm256_set1_pd(b.max.z()))), zero);
+    const __m256d box2 = dot3({gx, gy, gz}, {gx, gy, gz});
+    const __m256d near_box = _mm256_cmp_pd(box2, best2, _CMP_LT_OQ);
+    if (_mm256_movemask_pd(near_box) == 0) continue;
+    const auto& t = m.mesh.triangles[f];
+    __m256d feat;
+    const V3 c = closest_on_triangle4(p, m.mesh.positions[t[0]], m.mesh.positions[t[1]], m.mesh.positions[t[2]], feat);
+    const V3 off = sub3(c, p);
+    const __m256d d2 = dot3(off, off);
+    const __m256d better = _mm256_and_pd(near_box, _mm256_cmp_pd(d2, best2, _CMP_LT_OQ));
+    if (_mm256_movemask_pd(better) == 0) continue;
+    best2 = _mm256_blendv_pd(best2, d2, better);
+    closest.x = _mm256_blendv_pd(closest.x, c.x, better);
+    closest.y = _mm256_blendv_pd(closest.y, c.y, better);
+    closest.z = _mm256_blendv_pd(closest.z, c.z, better);
+    feature = _mm256_blendv_pd(feature, feat, better);
+    prim = _mm256_castpd_si256(_mm256_blendv_pd(_mm256_castsi256_pd(prim),
+                                                 _mm256_castsi256_pd(_mm256_set1_epi64x(static_cast<long long>(f))), better));
+  }
+  double b2[4], cx[4], cy[4], cz[4], ft[4];
+  long long pr[4];
+  _mm256_storeu_pd(b2, best2);
+  _mm256_storeu_pd(cx, closest.x);
+  _mm256_storeu_pd(cy, closest.y);
+  _mm256_storeu_pd(cz, closest.z);
+  _mm256_storeu_pd(ft, feature);
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(pr), prim);
+  for (int i = 0; i < n; ++i) {
+    if (!(b2[i] < limit)) {
+      out[i] = std::numeric_limits<double>::quiet_NaN();
+      continue;
+    }
+    Impl::Query q;
+    q.self = &m;
+    q.p = Vec3(x[i], y[i], z[i]);
+    q.best2 = b2[i];
+    q.closest = Vec3(cx[i], cy[i], cz[i]);
+    q.prim = static_cast<unsigned>(pr[i]);
+    q.feature = static_cast<int>(ft[i]);
+    out[i] = m.sign_at(q) * std::sqrt(q.best2);
+  }
+}
+#else
+void Target::signed_distances_if_within_avx2(int n, const double* px, const double* py, const double* pz,
+                                             double radius, const std::vector<unsigned>& near, double* out) const {
+  signed_distances_if_within_scalar(n, px, py, pz, radius, near, out);
+}
+#endif
+
+void Target::signed_distances_if_within(int n, const double* px, const double* py, const double* pz, double radius,
+                                        const std::vector<unsigned>& near, double* out) const {
+#if defined(__x86_64__)
+  static const bool wide = __builtin_cpu_supports("avx2") &&
+                           !(std::getenv("CUTSIM_AVX2") && std::string_view(std::getenv("CUTSIM_AVX2")) == "0");
+  if (wide) return signed_distances_if_within_avx2(n, px, py, pz, radius, near, out);
+#endif
+  signed_distances_if_within_scalar(n, px, py, pz, radius, near, out);
 }
 
 std::optional<Target::Plane> Target::common_plane(const std::vector<unsigned>& near) const {

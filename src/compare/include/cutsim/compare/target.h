@@ -37,6 +37,16 @@ public:
   /// that holds the query's), without a search of the whole mesh.
   std::optional<double> signed_distance_if_within(const Vec3& p, double radius,
                                                   const std::vector<unsigned>& near) const;
+  /// The same for the n points (px, py, pz)[i], n <= 4: out[i] the signed
+  /// distance, or NaN where there is none within `radius`. The same bits
+  /// as one query each (with AVX2, the four at once).
+  void signed_distances_if_within(int n, const double* px, const double* py, const double* pz, double radius,
+                                  const std::vector<unsigned>& near, double* out) const;
+  /// Without AVX2 (one query each) and with it, for the tests.
+  void signed_distances_if_within_scalar(int n, const double* px, const double* py, const double* pz, double radius,
+                                         const std::vector<unsigned>& near, double* out) const;
+  void signed_distances_if_within_avx2(int n, const double* px, const double* py, const double* pz, double radius,
+                                       const std::vector<unsigned>& near, double* out) const;
   /// A plane: the points x with n . x = c, n unit and pointing out of the material.
   struct Plane {
     Vec3 n;
