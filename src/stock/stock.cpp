@@ -657,6 +657,7 @@ void Stock::release_scratch() {
   std::vector<std::uint64_t>().swap(m.scratch_sort);
   std::vector<double>().swap(m.scratch_d);
   std::vector<Vec3>().swap(m.scratch_g);
+  m.scratch_bins.clear();
 }
 
 namespace {
@@ -1648,7 +1649,14 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
   // pieces really reach, not by their boxes (a roughing piece at 1 um
   // reaches some 450k leaves). Where a batch is split follows the counts
   // only, so runs repeat exactly; the union removed does not depend on it.
-  std::vector<std::vector<std::uint64_t>> per_prim(prims.size());
+  // (Each thread's pairs go to its own array, m.scratch_bins; which thread
+  // binned a piece changes only their order before the sort.)
+  auto binned_now = [&m] {
+    std::size_t n = 0;
+    for (const auto& v : m.scratch_bins) n += v.size();
+    return n;
+  };
+  for (auto& v : m.scratch_bins) v.clear();  // (an interrupted update may have left some)
   // A piece's voxel box (grown by the band where it reaches out) in the
   // ROI, and the leaves it spans: no more than it can bin.
   auto piece_box = [&](const sweep::Primitive& p) {
@@ -1671,7 +1679,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
       const double reach = sweep::interior_only(p) ? 0.0 : g;
       const CoordBBox bb = piece_box(p);
       if (bb.empty()) continue;
-      auto& out = per_prim[i];
+      auto& out = m.scratch_bins.local();
       const auto id = static_cast<std::uint32_t>(i);
       const std::int64_t nl = box_leaves(bb);
       // Only the leaves step 2 would not pass over (the same test on the
@@ -1767,8 +1775,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
     }
     tbb::parallel_for(tbb::blocked_range<std::size_t>(c0, c1), bin);
     if (interrupted()) return;  // abandoned: the caller throws
-    std::size_t chunk_pairs = 0;
-    for (std::size_t i = c0; i < c1; ++i) chunk_pairs += per_prim[i].size();
+    const std::size_t chunk_pairs = binned_now() - binned;
     binned += chunk_pairs;
     pairs_total += chunk_pairs;
     c0 = c1;
@@ -1776,9 +1783,9 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
     std::vector<std::uint64_t>& pairs = m.scratch_pairs;
     pairs.clear();
     pairs.reserve(binned);
-    for (std::size_t i = first; i < c0; ++i) {
-      pairs.insert(pairs.end(), per_prim[i].begin(), per_prim[i].end());
-      std::vector<std::uint64_t>().swap(per_prim[i]);
+    for (auto& v : m.scratch_bins) {
+      pairs.insert(pairs.end(), v.begin(), v.end());
+      v.clear();
     }
     const std::size_t from = first;
     first = c0;
