@@ -138,7 +138,7 @@ TEST(VoxelKernels, PlaneTestGivesThePortableBits) {
     ASSERT_EQ(want, portable) << "trial " << trial << ", n " << n;
     ASSERT_EQ(want, stock::detail::planes_below(d.data(), need.data(), yx.data(), yy.data(), yz.data(), n, pl, -0.03))
         << "trial " << trial;
-    if (stock::detail::cpu_has_avx2()) {
+    if (cpu_has_avx2()) {
       ASSERT_EQ(want, stock::detail::planes_below_avx2(d.data(), need.data(), yx.data(), yy.data(), yz.data(), n, pl, -0.03))
           << "trial " << trial << ", n " << n;
     }
@@ -208,7 +208,7 @@ TEST(VoxelKernels, BoxTestGivesThePortableBits) {
     ASSERT_EQ(want, portable) << "trial " << trial << ", n " << n;
     ASSERT_EQ(want, stock::detail::boxes_reach(d.data(), need.data(), px.data(), py.data(), pz.data(), n, box, inner, floor))
         << "trial " << trial;
-    if (stock::detail::cpu_has_avx2()) {
+    if (cpu_has_avx2()) {
       ASSERT_EQ(want,
                 stock::detail::boxes_reach_avx2(d.data(), need.data(), px.data(), py.data(), pz.data(), n, box, inner, floor))
           << "trial " << trial << ", n " << n;
@@ -285,7 +285,7 @@ TEST(VoxelKernels, QuarterBoundsGiveThePortableBits) {
     ASSERT_EQ(want, stock::detail::quarter_reach(data.data(), first, gamma, key, off.data(), inner, sp, yx.data(), yy.data(),
                                                  yz.data()))
         << "trial " << trial;
-    if (stock::detail::cpu_has_avx2()) {
+    if (cpu_has_avx2()) {
       ASSERT_EQ(want, stock::detail::quarter_reach_avx2(data.data(), first, gamma, key, off.data(), inner, sp, yx.data(),
                                                         yy.data(), yz.data()))
           << "trial " << trial;
@@ -348,7 +348,7 @@ TEST(VoxelKernels, OverlapCandidatesGiveThePortableBits) {
     const auto* pp = with_plane ? &pl : nullptr;
     ASSERT_EQ(want, stock::detail::overlap_candidates_scalar(data.data(), first, floor, pp, h)) << "trial " << trial;
     ASSERT_EQ(want, stock::detail::overlap_candidates(data.data(), first, floor, pp, h)) << "trial " << trial;
-    if (stock::detail::cpu_has_avx2()) {
+    if (cpu_has_avx2()) {
       ASSERT_EQ(want, stock::detail::overlap_candidates_avx2(data.data(), first, floor, pp, h)) << "trial " << trial;
     }
     set += std::popcount(want);
@@ -414,7 +414,7 @@ TEST(VoxelKernels, PrismDistancesGiveThePortableBits) {
       stock::detail::prism_distances_scalar(*pp, 0, n, px.data(), py.data(), pz.data(), portable.data());
       stock::detail::prism_distances(*pp, n, px.data(), py.data(), pz.data(), dispatched.data());
       ASSERT_EQ(0, std::memcmp(portable.data(), dispatched.data(), sizeof portable)) << cs.spec << ", trial " << trial;
-      if (stock::detail::cpu_has_avx2()) {
+      if (cpu_has_avx2()) {
         stock::detail::prism_distances_avx2(*pp, n, px.data(), py.data(), pz.data(), wide.data());
         for (int i = 0; i < n; ++i)
           ASSERT_EQ(0, std::memcmp(&portable[static_cast<std::size_t>(i)], &wide[static_cast<std::size_t>(i)], sizeof(double)))
@@ -474,7 +474,7 @@ TEST(VoxelKernels, BallLineDistancesGiveThePortableBits) {
         stock::detail::lower_by_ball_line_scalar(*lp, bits, px.data(), py.data(), pz.data(), portable.data());
         stock::detail::lower_by_ball_line(*lp, bits, px.data(), py.data(), pz.data(), dispatched.data());
         ASSERT_EQ(0, std::memcmp(portable.data(), dispatched.data(), sizeof portable)) << "trial " << trial;
-        if (stock::detail::cpu_has_avx2()) {
+        if (cpu_has_avx2()) {
           stock::detail::lower_by_ball_line_avx2(*lp, bits, px.data(), py.data(), pz.data(), wide.data());
           ASSERT_EQ(0, std::memcmp(portable.data(), wide.data(), sizeof portable)) << "trial " << trial;
         }
@@ -534,7 +534,7 @@ TEST(VoxelKernels, PrismAndJointLoweringGiveThePortableBits) {
       portable_fn(piece, b, portable.data());
       dispatched_fn(piece, b, dispatched.data());
       ASSERT_EQ(0, std::memcmp(portable.data(), dispatched.data(), sizeof portable)) << "trial " << trial;
-      if (stock::detail::cpu_has_avx2()) {
+      if (cpu_has_avx2()) {
         wide_fn(piece, b, wide.data());
         ASSERT_EQ(0, std::memcmp(portable.data(), wide.data(), sizeof portable)) << "trial " << trial;
       }

@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstdlib>
-#include <string_view>
 #include <limits>
 
 #include <embree3/rtcore.h>
@@ -12,6 +10,7 @@
 #include <immintrin.h>
 #endif
 
+#include "cutsim/core/cpu.h"
 #include "cutsim/core/error.h"
 
 namespace cutsim::compare {
@@ -467,9 +466,7 @@ void Target::signed_distances_if_within_avx2(int n, const double* px, const doub
 void Target::signed_distances_if_within(int n, const double* px, const double* py, const double* pz, double radius,
                                         const std::vector<unsigned>& near, double* out) const {
 #if defined(__x86_64__)
-  static const bool wide = __builtin_cpu_supports("avx2") &&
-                           !(std::getenv("CUTSIM_AVX2") && std::string_view(std::getenv("CUTSIM_AVX2")) == "0");
-  if (wide) return signed_distances_if_within_avx2(n, px, py, pz, radius, near, out);
+  if (use_avx2()) return signed_distances_if_within_avx2(n, px, py, pz, radius, near, out);
 #endif
   signed_distances_if_within_scalar(n, px, py, pz, radius, near, out);
 }

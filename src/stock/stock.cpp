@@ -1487,7 +1487,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
               // it, in fours. Of the voxels the box leaves the cone passed
               // over a third; four at a time the rest cost less than the
               // cone's one by one. The portable versions keep the cone.)
-              const bool wide = detail::avx2();
+              const bool wide = use_avx2();
               const auto* jp = wide ? std::get_if<sweep::JointPrim>(&pk) : nullptr;
               const auto* pp = wide ? std::get_if<sweep::ProfilePrim>(&pk) : nullptr;
               if (jp) {

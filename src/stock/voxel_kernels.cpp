@@ -4,8 +4,6 @@
 #include <array>
 #include <bit>
 #include <cstddef>
-#include <cstdlib>
-#include <cstring>
 #include <limits>
 
 #if defined(__x86_64__)
@@ -13,21 +11,6 @@
 #endif
 
 namespace cutsim::stock::detail {
-
-bool cpu_has_avx2() {
-#if defined(__x86_64__)
-  static const bool has = __builtin_cpu_supports("avx2");
-  return has;
-#else
-  return false;
-#endif
-}
-
-bool avx2() {
-  // (CUTSIM_AVX2=0: the portable versions, to compare runs with.)
-  static const bool on = cpu_has_avx2() && !(std::getenv("CUTSIM_AVX2") && std::strcmp(std::getenv("CUTSIM_AVX2"), "0") == 0);
-  return on;
-}
 
 // The voxels b < n (bits) of a quarter whose nearest distance so far d[b]
 // is above `floor` and where the plane lies below min(d[b], need[b]): those
@@ -75,7 +58,7 @@ std::uint64_t planes_below_avx2(const double* d, const double* need, const doubl
 
 std::uint64_t planes_below(const double* d, const double* need, const double* yx, const double* yy, const double* yz,
                            int n, const CentrePlane& pl, double floor) {
-  if (avx2()) return planes_below_avx2(d, need, yx, yy, yz, n, pl, floor);
+  if (use_avx2()) return planes_below_avx2(d, need, yx, yy, yz, n, pl, floor);
   return planes_below_scalar(d, need, yx, yy, yz, 0, n, pl, floor);
 }
 
@@ -160,7 +143,7 @@ std::uint64_t boxes_reach_avx2(const double* d, const double* need, const double
 
 std::uint64_t boxes_reach(const double* d, const double* need, const double* px, const double* py, const double* pz,
                           int n, const Aabb& box, bool inner, double floor) {
-  if (avx2()) return boxes_reach_avx2(d, need, px, py, pz, n, box, inner, floor);
+  if (use_avx2()) return boxes_reach_avx2(d, need, px, py, pz, n, box, inner, floor);
   return boxes_reach_scalar(d, need, px, py, pz, 0, n, box, inner, floor);
 }
 
@@ -236,7 +219,7 @@ std::uint64_t quarter_reach_avx2(const float* data, int first, float gamma, doub
 
 std::uint64_t quarter_reach(const float* data, int first, float gamma, double key, const double* off, bool inner,
                             const sweep::SectionPlane* sec, const double* yx, const double* yy, const double* yz) {
-  if (avx2()) return quarter_reach_avx2(data, first, gamma, key, off, inner, sec, yx, yy, yz);
+  if (use_avx2()) return quarter_reach_avx2(data, first, gamma, key, off, inner, sec, yx, yy, yz);
   return quarter_reach_scalar(data, first, gamma, key, off, inner, sec, yx, yy, yz);
 }
 
@@ -286,7 +269,7 @@ std::uint64_t overlap_candidates_avx2(const float* data, int first, double floor
 #endif
 
 std::uint64_t overlap_candidates(const float* data, int first, double floor, const CentrePlane* pl, double h) {
-  if (avx2()) return overlap_candidates_avx2(data, first, floor, pl, h);
+  if (use_avx2()) return overlap_candidates_avx2(data, first, floor, pl, h);
   return overlap_candidates_scalar(data, first, floor, pl, h);
 }
 
@@ -420,7 +403,7 @@ void prism_distances_avx2(const sweep::ProfilePrim& pp, int n, const double* px,
 
 void prism_distances(const sweep::ProfilePrim& pp, int n, const double* px, const double* py, const double* pz,
                      double* out) {
-  if (avx2()) prism_distances_avx2(pp, n, px, py, pz, out);
+  if (use_avx2()) prism_distances_avx2(pp, n, px, py, pz, out);
   else prism_distances_scalar(pp, 0, n, px, py, pz, out);
 }
 
@@ -549,13 +532,13 @@ void lower_by_joint_avx2(const sweep::JointPrim& jp, std::uint64_t bits, const d
 
 void lower_by_prism(const sweep::ProfilePrim& pp, std::uint64_t bits, const double* px, const double* py,
                     const double* pz, double* d) {
-  if (avx2()) lower_by_prism_avx2(pp, bits, px, py, pz, d);
+  if (use_avx2()) lower_by_prism_avx2(pp, bits, px, py, pz, d);
   else lower_by_prism_scalar(pp, bits, px, py, pz, d);
 }
 
 void lower_by_joint(const sweep::JointPrim& jp, std::uint64_t bits, const double* px, const double* py,
                     const double* pz, const double* need, double* d) {
-  if (avx2()) lower_by_joint_avx2(jp, bits, px, py, pz, need, d);
+  if (use_avx2()) lower_by_joint_avx2(jp, bits, px, py, pz, need, d);
   else lower_by_joint_scalar(jp, bits, px, py, pz, need, d);
 }
 
@@ -671,7 +654,7 @@ void lower_by_ball_line_avx2(const sweep::LinearPrim& lp, std::uint64_t bits, co
 
 void lower_by_ball_line(const sweep::LinearPrim& lp, std::uint64_t bits, const double* px, const double* py,
                         const double* pz, double* d) {
-  if (avx2()) lower_by_ball_line_avx2(lp, bits, px, py, pz, d);
+  if (use_avx2()) lower_by_ball_line_avx2(lp, bits, px, py, pz, d);
   else lower_by_ball_line_scalar(lp, bits, px, py, pz, d);
 }
 

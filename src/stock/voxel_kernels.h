@@ -7,6 +7,7 @@
 // tests hold both to the same bits.
 #include <cstdint>
 
+#include "cutsim/core/cpu.h"
 #include "cutsim/sweep/sweep.h"
 
 namespace cutsim::stock::detail {
@@ -74,13 +75,9 @@ std::uint64_t quarter_reach(const float* data, int first, float gamma, double ke
 /// -(c + (gx yx + gy yy + gz yz)) > floor, at the voxel's offset from the
 /// quarter's centre, y = h (x - 1.5, y - 1.5, z - 1.5).
 std::uint64_t overlap_candidates(const float* data, int first, double floor, const CentrePlane* pl, double h);
-/// Whether the CPU has AVX2 (false off x86-64).
-bool cpu_has_avx2();
-/// Whether the dispatching functions take the AVX2 versions: the CPU has
-/// AVX2 and the environment does not set CUTSIM_AVX2=0.
-bool avx2();
-/// The two versions, for the tests (the AVX2 ones only where
-/// cpu_has_avx2(); off x86-64 they are the portable ones).
+/// (The dispatching functions take the AVX2 versions where use_avx2(),
+/// cutsim/core/cpu.h.) The two versions, for the tests (the AVX2 ones only
+/// where cpu_has_avx2(); off x86-64 they are the portable ones).
 std::uint64_t planes_below_scalar(const double* d, const double* need, const double* yx, const double* yy,
                                   const double* yz, int from, int n, const CentrePlane& pl, double floor);
 std::uint64_t planes_below_avx2(const double* d, const double* need, const double* yx, const double* yy,
