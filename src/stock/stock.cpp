@@ -810,6 +810,8 @@ constexpr std::int64_t kListLeaves = 4096;
 // a parallel loop of its own, and raster40k's 0.5 mm moves came 64 to a
 // loop, some 600 loops (its binning 0.121 -> 0.103 s in 4096s).
 constexpr std::size_t kBinChunk = 64;
+// Keys a thread's binning array keeps between applies (Impl::scratch_bins).
+constexpr std::size_t kKeepBinKeys = std::size_t(1) << 18;
 constexpr std::size_t kBinChunkMax = 4096;
 
 // Drops from `sub` (key, index) the pieces that no voxel within `hw` (per
@@ -1789,7 +1791,11 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
     pairs.reserve(binned);
     for (auto& v : m.scratch_bins) {
       pairs.insert(pairs.end(), v.begin(), v.end());
-      v.clear();
+      // (Kept up to 2 MB each; larger, freed, as the blade's 1 um roughing
+      // bins millions: held through the apply, they raised its peak RSS
+      // by some 100 MB.)
+      if (v.capacity() > kKeepBinKeys) std::vector<std::uint64_t>().swap(v);
+      else v.clear();
     }
     const std::size_t from = first;
     first = c0;
