@@ -676,8 +676,12 @@ void radix_sort(std::vector<std::uint64_t>& v, std::vector<std::uint64_t>& tmp, 
   }
   constexpr int kDigit = 11;
   constexpr std::size_t kBuckets = std::size_t(1) << kDigit;
-  constexpr std::size_t kSlice = std::size_t(1) << 18;  // keys per slice
-  const std::size_t n = v.size(), slices = (n + kSlice - 1) / kSlice;
+  // Keys per slice: up to 2^18, but at least eight slices down to 2^14
+  // keys each (raster40k sorts ~100k keys a batch: one slice was one
+  // thread).
+  const std::size_t n = v.size();
+  const std::size_t kSlice = std::clamp<std::size_t>((n + 7) / 8, std::size_t(1) << 14, std::size_t(1) << 18);
+  const std::size_t slices = (n + kSlice - 1) / kSlice;
   tmp.resize(n);
   std::vector<std::size_t> count(slices * kBuckets);  // slice s's counts at s * kBuckets
   for (int shift = 0; shift < bits; shift += kDigit) {
