@@ -814,9 +814,9 @@ constexpr std::int64_t kListLeaves = 4096;
 // a parallel loop of its own, and raster40k's 0.5 mm moves came 64 to a
 // loop, some 600 loops (its binning 0.121 -> 0.103 s in 4096s).
 constexpr std::size_t kBinChunk = 64;
+constexpr std::size_t kBinChunkMax = 4096;
 // Keys a thread's binning array keeps between applies (Impl::scratch_bins).
 constexpr std::size_t kKeepBinKeys = std::size_t(1) << 18;
-constexpr std::size_t kBinChunkMax = 4096;
 
 // Drops from `sub` (key, index) the pieces that no voxel within `hw` (per
 // axis) of `c` can have strictly nearer than the one of least key. That
@@ -1718,6 +1718,12 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
         if (plane) *plane = gr;
         return std::max(*d - hd, *d - hd / std::sqrt(3.0) * gr.cwiseAbs().sum());
       };
+      // Lists leaf o, which the piece reaches at distance d from its centre
+      // (marked deep: the test step 2 makes on the smallest distance).
+      auto list = [&](const Coord& o, double d) {
+        const bool deep = marks && d < -(g + hd0) && m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
+        out.push_back(keys.key(o, deep ? kDeep : id));
+      };
       auto leaf = [&](const Coord& o) {
         float tile_value = 0;
         const LeafT* lf = lookup.leaf(o, &tile_value);
@@ -1742,9 +1748,7 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
           }
           if (lp && d + lp->least(gr, h) >= 1e-6 * h) return;
         }
-        // (the test step 2 makes on the smallest distance)
-        const bool deep = marks && d < -(g + hd0) && m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
-        out.push_back(keys.key(o, deep ? kDeep : id));
+        list(o, d);
       };
       // A ball end's line: the leaves that are not air are held and their
       // distances worked out eight at a time (lower_by_ball_line: four at
@@ -1760,13 +1764,8 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
         std::fill_n(held.d.begin(), held.n, std::numeric_limits<double>::infinity());
         lower_by_ball_line(*ball, (std::uint64_t(1) << held.n) - 1, held.x.data(), held.y.data(), held.z.data(),
                            held.d.data());
-        for (int j = 0; j < held.n; ++j) {
-          const auto k = static_cast<std::size_t>(j);
-          const double d = held.d[k];
-          if (d - hd0 > reach) continue;
-          const bool deep = marks && d < -(g + hd0) && m.roi_index.isInside(CoordBBox::createCube(held.o[k], kLeafDim));
-          out.push_back(keys.key(held.o[k], deep ? kDeep : id));
-        }
+        for (std::size_t k = 0; k < static_cast<std::size_t>(held.n); ++k)
+          if (!(held.d[k] - hd0 > reach)) list(held.o[k], held.d[k]);  // (as `leaf` tests)
         held.n = 0;
       };
       auto ball_leaf = [&](const Coord& o) {
