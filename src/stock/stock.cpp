@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <mutex>
 #include <sstream>
+#include <type_traits>
 
 #include <openvdb/tools/Interpolation.h>
 #include <tbb/blocked_range.h>
@@ -129,8 +130,13 @@ constexpr int kMid = 1 << Stock::Impl::kBlockLog2;  // the occupancy map's block
 static_assert(kNode1Dim == 1 << Stock::Impl::kNodeLog2, "the node map's nodes are the tree's 128^3 nodes");
 constexpr int kSub = 2 * kLeafDim;
 
-template <bool kSubLevel = false, class Keep, class Leaf>
-void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep keep, Leaf leaf) {
+//
+// With kSubLevel, `keep_subs` (when given) tests a 32^3 cube's 16^3 cubes
+// together in place of `keep`: keep_subs(n, x, y, z, hd) returns the bits
+// of those of the n centres (x[k], y[k], z[k]) to keep, as keep would.
+template <bool kSubLevel = false, class Keep, class Leaf, class KeepSubs = std::nullptr_t>
+void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep keep, Leaf leaf,
+                         KeepSubs keep_subs = nullptr) {
   const double hd1 = std::sqrt(3.0) * 0.5 * (kNode1Dim - 1) * h, hd2 = std::sqrt(3.0) * 0.5 * (kMid - 1) * h,
                hd3 = std::sqrt(3.0) * 0.5 * (kSub - 1) * h;
   auto centre = [&](int x, int y, int z, int dim) {
@@ -181,6 +187,29 @@ void for_each_leaf_block(const Vec3& origin, double h, const CoordBBox& bb, Keep
                 continue;
               }
               const Coord s0(mid.min().x() & ~(kSub - 1), mid.min().y() & ~(kSub - 1), mid.min().z() & ~(kSub - 1));
+              if constexpr (!std::is_same_v<KeepSubs, std::nullptr_t>) {
+                // (The same cubes in the same order; their centres as `centre` has them.)
+                std::array<Coord, 8> so;
+                std::array<double, 8> cx, cy, cz;
+                int n = 0;
+                for (int x3 = s0.x(); x3 <= mid.max().x(); x3 += kSub)
+                  for (int y3 = s0.y(); y3 <= mid.max().y(); y3 += kSub)
+                    for (int z3 = s0.z(); z3 <= mid.max().z(); z3 += kSub) {
+                      so[n] = Coord(x3, y3, z3);
+                      cx[n] = origin.x() + h * (x3 + 0.5 * (kSub - 1));
+                      cy[n] = origin.y() + h * (y3 + 0.5 * (kSub - 1));
+                      cz[n] = origin.z() + h * (z3 + 0.5 * (kSub - 1));
+                      ++n;
+                    }
+                const unsigned kept = keep_subs(n, cx.data(), cy.data(), cz.data(), hd3);
+                for (int k = 0; k < n; ++k) {
+                  if (!(kept >> k & 1u)) continue;
+                  CoordBBox sub = CoordBBox::createCube(so[k], kSub);
+                  sub.intersect(mid);
+                  if (!sub.empty()) leaves_of(sub, [](int, int, int) { return true; });
+                }
+                continue;
+              }
               for (int x3 = s0.x(); x3 <= mid.max().x(); x3 += kSub)
                 for (int y3 = s0.y(); y3 <= mid.max().y(); y3 += kSub)
                   for (int z3 = s0.z(); z3 <= mid.max().z(); z3 += kSub) {
@@ -1785,23 +1814,35 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
           for (int y = bb.min().y() & ~7; y <= bb.max().y(); y += kLeafDim)
             for (int z = bb.min().z() & ~7; z <= bb.max().z(); z += kLeafDim) leaf(Coord(x, y, z));
       } else {
-        for_each_leaf_block<true>(
-            m.origin, h, bb,
-            [&](const Vec3& c, double hd, const Coord& bo, int dim) {
-              if (dim == kMid && !m.may_hold_material(bo)) return false;
-              if (dim == kNode1Dim && !m.node_may_hold_material(bo)) return false;
-              double d = 0;
-              if (least(c, hd, &d) > reach) return false;
-              if (dim == kSub) return true;  // (blocks set to air whole are the occupancy map's: 32^3 or 128^3)
-              // Each voxel's distance is then at most -g: air (step 1b).
-              if (lip && d <= -(g + hd) && m.roi_index.isInside(CoordBBox::createCube(bo, dim))) {
-                air_per_prim[i].push_back({bo, dim});
-                return false;
-              }
-              return true;
-            },
-            [&](const Coord& o) { ball ? ball_leaf(o) : leaf(o); });
-        flush_held();
+        auto keep = [&](const Vec3& c, double hd, const Coord& bo, int dim) {
+          if (dim == kMid && !m.may_hold_material(bo)) return false;
+          if (dim == kNode1Dim && !m.node_may_hold_material(bo)) return false;
+          double d = 0;
+          if (least(c, hd, &d) > reach) return false;
+          if (dim == kSub) return true;  // (blocks set to air whole are the occupancy map's: 32^3 or 128^3)
+          // Each voxel's distance is then at most -g: air (step 1b).
+          if (lip && d <= -(g + hd) && m.roi_index.isInside(CoordBBox::createCube(bo, dim))) {
+            air_per_prim[i].push_back({bo, dim});
+            return false;
+          }
+          return true;
+        };
+        if (ball) {
+          // (A 32^3 cube's 16^3 cubes, eight at a time: `least`'s test, the same bits.)
+          auto keep_subs = [&](int n, const double* x, const double* y, const double* z, double hd) {
+            std::array<double, 8> d;
+            d.fill(std::numeric_limits<double>::infinity());
+            lower_by_ball_line(*ball, (std::uint64_t(1) << n) - 1, x, y, z, d.data());
+            unsigned kept = 0;
+            for (int k = 0; k < n; ++k)
+              if (!(d[k] - hd > reach)) kept |= 1u << k;
+            return kept;
+          };
+          for_each_leaf_block<true>(m.origin, h, bb, keep, ball_leaf, keep_subs);
+          flush_held();
+        } else {
+          for_each_leaf_block<true>(m.origin, h, bb, keep, leaf);
+        }
       }
     }
   };
