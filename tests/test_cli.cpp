@@ -531,6 +531,50 @@ TEST(HugePages, ExportGuardTouchesNewMemoryInSmallPages) {
   EXPECT_EQ(::prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0), before);
 }
 
+// A stock grid estimated under 2 GiB takes its new memory in small pages
+// (cheaper to touch first on the 2-core machine); a larger one keeps the
+// huge pages malloc asks for; CUTSIM_STOCK_PAGES overrides.
+TEST(HugePages, GridsUnderTwoGiBTakeSmallPages) {
+  const char* was = std::getenv("CUTSIM_STOCK_PAGES");
+  const std::optional<std::string> before = was ? std::optional<std::string>(was) : std::nullopt;
+  ::unsetenv("CUTSIM_STOCK_PAGES");
+  const std::size_t gib2 = std::size_t(2) << 30;
+  EXPECT_TRUE(stock_wants_small_pages(150u << 20));
+  EXPECT_TRUE(stock_wants_small_pages(gib2 - 1));
+  EXPECT_FALSE(stock_wants_small_pages(gib2));
+  EXPECT_FALSE(stock_wants_small_pages(3 * (std::size_t(1) << 30)));
+  ::setenv("CUTSIM_STOCK_PAGES", "huge", 1);
+  EXPECT_FALSE(stock_wants_small_pages(150u << 20));
+  ::setenv("CUTSIM_STOCK_PAGES", "small", 1);
+  EXPECT_TRUE(stock_wants_small_pages(gib2));
+  ::setenv("CUTSIM_STOCK_PAGES", "other", 1);  // (not a choice: the size decides)
+  EXPECT_FALSE(stock_wants_small_pages(gib2));
+  if (before) ::setenv("CUTSIM_STOCK_PAGES", before->c_str(), 1);
+  else ::unsetenv("CUTSIM_STOCK_PAGES");
+}
+
+// The report says which pages the stock's memory came in: a small job's
+// 4 KB; 2 MB only where told to and malloc asks for huge pages.
+TEST(Cli, ReportSaysWhichPagesTheStockHad) {
+  TempDir dir;
+  dir.write("slot.nc", "G0 X-2 Y0 Z1\nG1 Z-0.1 F100\nG1 X2\nG0 Z1\nM30\n");
+  dir.write("slot.toml", "[stock]\nbox = [-1, -1, -1, 1, 1, 0]\n[tool]\nspec = \"flat:d=1\"\n[simulation]\nvoxel_mm = 0.05\n");
+  const bool can = malloc_is_glibcs() && transparent_huge_pages_available();
+  auto page_kb = [&](const std::string& env) {
+    std::string out, err;
+    EXPECT_EQ(run_cli_raw("env -u GLIBC_TUNABLES -u CUTSIM_HUGE_PAGES -u CUTSIM_STOCK_PAGES " + env + " " +
+                              std::string(CUTSIM_BIN) + " run " + dir.file("slot.nc") + " --format json -o " +
+                              dir.file("out"),
+                          &out, &err),
+              0)
+        << err;
+    return nlohmann::json::parse(out)["stock_page_kb"].get<int>();
+  };
+  EXPECT_EQ(page_kb(""), 4);
+  EXPECT_EQ(page_kb("CUTSIM_STOCK_PAGES=huge"), can ? 2048 : 4);
+  EXPECT_EQ(page_kb("CUTSIM_STOCK_PAGES=huge CUTSIM_HUGE_PAGES=0"), 4);
+}
+
 // cutsim starts itself again with huge pages asked for (where the kernel
 // has them and the allocator is glibc's), and `cutsim bench` says which
 // pages its runs had; CUTSIM_HUGE_PAGES=0 and a hugetlb the user set keep

@@ -196,7 +196,8 @@ Action add_bench_command(CLI::App& app) {
                 "measured again before each run, /kern is to the case's median)\n"
                 "malloc: %s\n",
                 kernel0, threads, threads == 1 ? "" : "s",
-                huge ? "transparent huge pages (glibc.malloc.hugetlb=1)" : "4 KB pages");
+                huge ? "transparent huge pages (glibc.malloc.hugetlb=1); a stock grid under 2 GiB, 4 KB pages"
+                     : "4 KB pages");
     std::printf("%-20s %8s %8s %8s %12s %8s %7s %9s %10s %10s %6s %6s %11s %11s %11s %8s %6s\n", "case", "blocks",
                 "moves", "voxel_um", "active_vox", "wall_s", "rss_MB", "moves/s", "eval/s", "vox_upd/s", "/kern", "eval%",
                 "removed_mm3", "over_mm3", "under_mm3", "contacts", "axis");
@@ -293,6 +294,7 @@ Action add_bench_command(CLI::App& app) {
       row["voxel_updates_per_s"] = vps;
       row["kernel_updates_per_s"] = kernel;
       row["malloc_huge_pages"] = huge;
+      row["stock_page_kb"] = rep.value("stock_page_kb", 4);
       // The figures against the case's goals: in the row, and as a line
       // printed after the table.
       {

@@ -79,6 +79,14 @@ SmallPagesForNewMemory::~SmallPagesForNewMemory() {
   if (set_) ::prctl(PR_SET_THP_DISABLE, 0, 0, 0, 0);
 }
 
+bool stock_wants_small_pages(std::size_t estimated_bytes) {
+  if (const char* opt = std::getenv("CUTSIM_STOCK_PAGES")) {
+    if (std::strcmp(opt, "small") == 0) return true;
+    if (std::strcmp(opt, "huge") == 0) return false;
+  }
+  return estimated_bytes < (std::size_t(2) << 30);
+}
+
 void reexec_with_huge_pages(char** argv) {
   if (kSanitized) return;
   if (const char* opt = std::getenv("CUTSIM_HUGE_PAGES"); opt && std::strcmp(opt, "0") == 0) return;

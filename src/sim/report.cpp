@@ -139,6 +139,7 @@ std::string report_json(const SimResult& r, const ReportOutputs& out) {
                    {"mesh", r.timing.mesh_s}, {"compare", r.timing.compare_s}, {"write", r.timing.write_s},
                    {"stock_update_steps", {{"bin", st.bin_s}, {"classify", st.classify_s},
                                            {"topology", st.topology_s}, {"voxels", st.voxels_s}}}};
+  j["stock_page_kb"] = r.stock_page_kb;
   j["peak_rss_simulate_mb"] = r.timing.peak_rss_simulate_mb;
   j["peak_rss_mb"] = peak_rss_mb();
   return j.dump(2) + "\n";

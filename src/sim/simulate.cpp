@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <optional>
 #include <span>
 #include <sstream>
 #include <sys/resource.h>
@@ -13,6 +14,7 @@
 #include <tbb/parallel_reduce.h>
 
 #include "cutsim/core/error.h"
+#include "cutsim/core/huge_pages.h"
 #include "cutsim/core/interrupt.h"
 #include "cutsim/gcode/program_reader.h"
 #include "cutsim/io/mesh_io.h"
@@ -406,6 +408,13 @@ SimResult simulate(const SimOptions& opt) {
     // Nothing reaches the stock: a minimal grid keeps the outputs uniform.
     roi = Aabb{res.stock_box.max - Vec3::Constant(margin), res.stock_box.max};
   }
+  // A grid under 2 GiB takes its new memory in small pages, until the
+  // simulation ends (stock_wants_small_pages: on this machine they cost
+  // less to touch first, and a grid that size gains little from huge ones).
+  std::optional<SmallPagesForNewMemory> small_pages;
+  if (stock_wants_small_pages(stock::estimate_memory_bytes(res.stock_box, roi.expanded(margin), sopt)))
+    small_pages.emplace();
+  res.stock_page_kb = (small_pages && small_pages->active()) || !malloc_huge_pages() ? 4 : 2048;
   try {
     res.stock = std::make_unique<stock::Stock>(res.stock_box, roi.expanded(margin), sopt);
   } catch (const InterruptedError& e) {

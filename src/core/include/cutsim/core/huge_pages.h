@@ -7,6 +7,7 @@
 // malloc ask the kernel for 2 MB pages (madvise), but glibc reads its
 // tunables only when a program starts, so cutsim sets it and starts
 // itself again (reexec_with_huge_pages).
+#include <cstddef>
 #include <optional>
 #include <string>
 
@@ -65,6 +66,23 @@ public:
 private:
   bool set_ = false;
 };
+
+/// Whether a stock grid of about `estimated_bytes` (stock::
+/// estimate_memory_bytes) should take its new memory in 4 KB pages
+/// (SmallPagesForNewMemory over the simulation): below 2 GiB, yes. On the
+/// 2-core virtual machine a 2 MB page first touched costs 3-4.5 ms where
+/// the machine has handed its free memory back to the host (it does so
+/// within a second of its being freed: free page reporting), 0.2 ms where
+/// it has not, and 512 small pages some 0.8 ms either way. A run of
+/// raster40k touches some 80 MB of new memory (its grid's leaves, the
+/// update's scratch): its simulation took 0.33-0.51 s with huge pages,
+/// by what ran before it, and 0.35-0.36 s with small ones; the
+/// snowflake's (0.9 GB) bench 9.5-9.6 s and 9.1-9.2 s. The blade at
+/// 1 um (3 GB), whose leaves the update visits in no set order, keeps its
+/// huge pages: 38.7 s with them, 40.4 s without. CUTSIM_STOCK_PAGES=small
+/// or =huge overrides the choice (huge: only where malloc asks for them,
+/// malloc_huge_pages).
+bool stock_wants_small_pages(std::size_t estimated_bytes);
 
 /// Starts this program again (/proc/self/exe, the same arguments) with
 /// glibc.malloc.hugetlb=1 added to GLIBC_TUNABLES, where that can help:

@@ -113,6 +113,9 @@ struct SimResult {
   std::vector<motion::Warning> warnings;
   std::unique_ptr<stock::Stock> stock;
   Timing timing;
+  /// The page size the stock's new memory came in: 4 (KB) or 2048, the
+  /// transparent huge pages malloc asks for (core/huge_pages.h).
+  int stock_page_kb = 4;
   std::string machine;                          ///< name of the machine used
   std::vector<machine::AxisViolation> axis_limit_violations;
   std::vector<machine::AmplitudeLimit> amplitude_limits;
