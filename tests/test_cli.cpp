@@ -510,6 +510,7 @@ TEST(HugePages, ExportGuardTouchesNewMemoryInSmallPages) {
     const SmallPagesForNewMemory outer;
     EXPECT_EQ(outer.active(), before == 0);
     EXPECT_EQ(::prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0), 1);
+    EXPECT_FALSE(huge_pages_for_new_memory());
     {
       const SmallPagesForNewMemory inner;
       EXPECT_FALSE(inner.active());
@@ -559,7 +560,9 @@ TEST(Cli, ReportSaysWhichPagesTheStockHad) {
   TempDir dir;
   dir.write("slot.nc", "G0 X-2 Y0 Z1\nG1 Z-0.1 F100\nG1 X2\nG0 Z1\nM30\n");
   dir.write("slot.toml", "[stock]\nbox = [-1, -1, -1, 1, 1, 0]\n[tool]\nspec = \"flat:d=1\"\n[simulation]\nvoxel_mm = 0.05\n");
-  const bool can = malloc_is_glibcs() && transparent_huge_pages_available();
+  // (A process with huge pages off passes that on to the runs it starts.)
+  const bool can =
+      malloc_is_glibcs() && transparent_huge_pages_available() && ::prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0) == 0;
   auto page_kb = [&](const std::string& env) {
     std::string out, err;
     EXPECT_EQ(run_cli_raw("env -u GLIBC_TUNABLES -u CUTSIM_HUGE_PAGES -u CUTSIM_STOCK_PAGES " + env + " " +

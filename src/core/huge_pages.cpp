@@ -79,6 +79,10 @@ SmallPagesForNewMemory::~SmallPagesForNewMemory() {
   if (set_) ::prctl(PR_SET_THP_DISABLE, 0, 0, 0, 0);
 }
 
+bool huge_pages_for_new_memory() {
+  return malloc_huge_pages() && ::prctl(PR_GET_THP_DISABLE, 0, 0, 0, 0) == 0;
+}
+
 bool stock_wants_small_pages(std::size_t estimated_bytes) {
   if (const char* opt = std::getenv("CUTSIM_STOCK_PAGES")) {
     if (std::strcmp(opt, "small") == 0) return true;

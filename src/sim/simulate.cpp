@@ -414,7 +414,7 @@ SimResult simulate(const SimOptions& opt) {
   std::optional<SmallPagesForNewMemory> small_pages;
   if (stock_wants_small_pages(stock::estimate_memory_bytes(res.stock_box, roi.expanded(margin), sopt)))
     small_pages.emplace();
-  res.stock_page_kb = (small_pages && small_pages->active()) || !malloc_huge_pages() ? 4 : 2048;
+  res.stock_page_kb = huge_pages_for_new_memory() ? 2048 : 4;
   try {
     res.stock = std::make_unique<stock::Stock>(res.stock_box, roi.expanded(margin), sopt);
   } catch (const InterruptedError& e) {

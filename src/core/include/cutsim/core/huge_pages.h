@@ -74,15 +74,20 @@ private:
 /// the machine has handed its free memory back to the host (it does so
 /// within a second of its being freed: free page reporting), 0.2 ms where
 /// it has not, and 512 small pages some 0.8 ms either way. A run of
-/// raster40k touches some 80 MB of new memory (its grid's leaves, the
+/// raster40k touches some 85 MB of new memory (its grid's leaves, the
 /// update's scratch): its simulation took 0.33-0.51 s with huge pages,
-/// by what ran before it, and 0.35-0.36 s with small ones; the
+/// by what ran before it, and 0.35-0.38 s with small ones; the
 /// snowflake's (0.9 GB) bench 9.5-9.6 s and 9.1-9.2 s. The blade at
 /// 1 um (3 GB), whose leaves the update visits in no set order, keeps its
 /// huge pages: 38.7 s with them, 40.4 s without. CUTSIM_STOCK_PAGES=small
 /// or =huge overrides the choice (huge: only where malloc asks for them,
 /// malloc_huge_pages).
 bool stock_wants_small_pages(std::size_t estimated_bytes);
+
+/// Whether memory this process touches for the first time now comes in
+/// huge pages: malloc asks for them (malloc_huge_pages) and they are not
+/// turned off for the process (SmallPagesForNewMemory, or from its start).
+bool huge_pages_for_new_memory();
 
 /// Starts this program again (/proc/self/exe, the same arguments) with
 /// glibc.malloc.hugetlb=1 added to GLIBC_TUNABLES, where that can help:
