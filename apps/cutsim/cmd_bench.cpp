@@ -192,12 +192,15 @@ Action add_bench_command(CLI::App& app) {
     std::vector<std::pair<std::string, std::string>> phase_lines;  // (case, its phases' line)
     // (The runs inherit this process's GLIBC_TUNABLES, and with it malloc's pages.)
     const bool huge = malloc_huge_pages();
+    const std::string stock_pages =
+        huge ? "; a stock grid under " + fmt_g(static_cast<double>(kStockHugePagesFrom) / (1u << 30)) + " GiB, 4 KB pages"
+             : "";
     std::printf("kernel: %.3g voxel updates/s on %d thread%s (ball-end distance, max, write back, in cache; "
                 "measured again before each run, /kern is to the case's median)\n"
-                "malloc: %s\n",
+                "malloc: %s%s\n",
                 kernel0, threads, threads == 1 ? "" : "s",
-                huge ? "transparent huge pages (glibc.malloc.hugetlb=1); a stock grid under 2 GiB, 4 KB pages"
-                     : "4 KB pages");
+                huge ? "transparent huge pages (glibc.malloc.hugetlb=1)" : "4 KB pages",
+                stock_pages.c_str());
     std::printf("%-20s %8s %8s %8s %12s %8s %7s %9s %10s %10s %6s %6s %11s %11s %11s %8s %6s\n", "case", "blocks",
                 "moves", "voxel_um", "active_vox", "wall_s", "rss_MB", "moves/s", "eval/s", "vox_upd/s", "/kern", "eval%",
                 "removed_mm3", "over_mm3", "under_mm3", "contacts", "axis");

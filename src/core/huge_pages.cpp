@@ -88,7 +88,7 @@ bool stock_wants_small_pages(std::size_t estimated_bytes) {
     if (std::strcmp(opt, "small") == 0) return true;
     if (std::strcmp(opt, "huge") == 0) return false;
   }
-  return estimated_bytes < (std::size_t(2) << 30);
+  return estimated_bytes < kStockHugePagesFrom;
 }
 
 void reexec_with_huge_pages(char** argv) {

@@ -83,6 +83,8 @@ private:
 /// or =huge overrides the choice (huge: only where malloc asks for them,
 /// malloc_huge_pages).
 bool stock_wants_small_pages(std::size_t estimated_bytes);
+/// The size from which stock_wants_small_pages says no (2 GiB).
+inline constexpr std::size_t kStockHugePagesFrom = std::size_t(2) << 30;
 
 /// Whether memory this process touches for the first time now comes in
 /// huge pages: malloc asks for them (malloc_huge_pages) and they are not
