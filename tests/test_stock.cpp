@@ -9,6 +9,7 @@
 #include <limits>
 #include <random>
 #include <variant>
+#include <vector>
 
 #include "cutsim/sweep/sweep.h"
 #include "cutsim/tool/tool.h"
@@ -147,6 +148,118 @@ TEST(VoxelKernels, PlaneTestGivesThePortableBits) {
   }
   EXPECT_EQ(tested, 2000);
   EXPECT_GT(set, 5000);  // the tests pass some voxels and not others
+}
+
+// Which of a leaf's convex pieces a quarter takes (quarter_pieces), against
+// the loop the stock update made per piece, in Eigen's expressions: the
+// keys in order up to the first too far, the box, the plane at the
+// quarter's centre, the bounded key; the seeds; the place of the least.
+TEST(VoxelKernels, QuarterPiecesGiveTheLoopsPieces) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  int tested = 0, taken = 0, stopped = 0, by_box = 0, by_plane = 0, by_key = 0, unbounded = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    const int n = static_cast<int>(rng() % 41);
+    const double hq = 1.5 * kH, hd = std::sqrt(3.0) * hq;
+    const Vec3 lc(u(rng), u(rng), u(rng));
+    // A quarter's centre, 2 voxels from the leaf's along each axis (its
+    // offset as the update takes it, cb - lc).
+    const Vec3 cb = lc + 2 * kH * Vec3(2.0 * (rng() % 2) - 1, 2.0 * (rng() % 2) - 1, 2.0 * (rng() % 2) - 1);
+    const Vec3 r = cb - lc;
+    const double oc = r.norm();
+    // Mostly a cut's quarter (material to 0.03 deep); now and then one
+    // whose reach is not positive.
+    const double need_max = rng() % 8 == 0 ? -0.04 : 0.03 * u(rng);
+    std::vector<double> key(static_cast<std::size_t>(n));
+    for (auto& k : key) k = rng() % 10 == 0 ? -kInf : 0.12 * u(rng) - 0.04;
+    std::sort(key.begin(), key.end());
+    std::vector<Aabb> box;
+    std::vector<Vec3> grad;
+    std::vector<char> clip;
+    std::array<std::vector<double>, 12> fv;
+    for (auto& f : fv) f.resize(static_cast<std::size_t>(n));
+    for (int k = 0; k < n; ++k) {
+      const Vec3 lo = cb + Vec3(0.1 * u(rng) - 0.08, 0.1 * u(rng) - 0.08, 0.1 * u(rng) - 0.08);
+      box.push_back({lo, lo + Vec3(0.06 * u(rng), 0.06 * u(rng), 0.06 * u(rng))});
+      // (Unit gradients, and some shorter and longer: the key's test passes
+      // over a piece the plane's leaves only where |g|_1 > sqrt(3).)
+      const double len[4] = {1.0, 1.0, 0.2, 1.8};
+      const Vec3 g = Vec3(2 * u(rng) - 1, 2 * u(rng) - 1, 2 * u(rng) - 1).normalized() * len[rng() % 4];
+      grad.push_back(g);
+      clip.push_back(rng() % 3 != 0);
+      const auto i = static_cast<std::size_t>(k);
+      const double vals[12] = {key[i], lo.x(), lo.y(), lo.z(), box.back().max.x(), box.back().max.y(), box.back().max.z(),
+                               g.x(), g.y(), g.z(), g.cwiseAbs().sum(), clip.back() ? 1.0 : 0.0};
+      for (std::size_t f = 0; f < 12; ++f) fv[f][i] = vals[f];
+    }
+    const stock::detail::LeafPieces lp{fv[0].data(), fv[1].data(), fv[2].data(), fv[3].data(),
+                                       fv[4].data(), fv[5].data(), fv[6].data(), fv[7].data(),
+                                       fv[8].data(), fv[9].data(), fv[10].data(), fv[11].data()};
+    // The loop, as the update wrote it.
+    std::vector<std::pair<double, std::uint32_t>> want;
+    std::vector<double> want_seed(static_cast<std::size_t>(n), std::nan(""));
+    for (int k = 0; k < n; ++k) {
+      const auto i = static_cast<std::size_t>(k);
+      if (key[i] - oc - hd >= need_max) {
+        ++stopped;
+        break;
+      }
+      const double b2 = sweep::detail::box_distance2(box[i], cb);
+      const double reach = need_max + hd;
+      if (b2 > 0 && (reach <= 0 || b2 >= reach * reach)) {
+        ++by_box;
+        continue;
+      }
+      const double dk = key[i] + grad[i].dot(cb - lc);
+      if (dk - hq * grad[i].cwiseAbs().sum() >= need_max) {
+        ++by_plane;
+        continue;
+      }
+      want_seed[i] = dk;
+      const double bk = dk > 0 || clip[i] ? dk : -kInf;
+      unbounded += bk == -kInf;
+      if (bk - hd >= need_max) {
+        ++by_key;
+        continue;
+      }
+      want.emplace_back(bk, static_cast<std::uint32_t>(k));
+    }
+    const auto want_least = static_cast<int>(std::min_element(want.begin(), want.end()) - want.begin());
+    const stock::detail::QuarterAt at{cb.x(), cb.y(), cb.z(), r.x(), r.y(), r.z(), oc, need_max, hd, hq};
+    auto check = [&](const char* version, auto&& run) {
+      std::vector<std::pair<double, std::uint32_t>> got(static_cast<std::size_t>(n));
+      std::vector<double> seed(static_cast<std::size_t>(n), std::nan(""));
+      int least = -1;
+      got.resize(static_cast<std::size_t>(run(seed.data(), got.data(), &least)));
+      ASSERT_EQ(want, got) << version << ", trial " << trial << ", n " << n;
+      if (!want.empty()) {
+        EXPECT_EQ(want_least, least) << version << ", trial " << trial;
+      }
+      for (const auto& [bk, k] : want) EXPECT_EQ(want_seed[k], seed[k]) << version << ", trial " << trial;
+    };
+    check("portable", [&](double* seed, auto* out, int* least) {
+      return stock::detail::quarter_pieces_scalar(lp, 0, n, at, seed, out, least);
+    });
+    check("dispatched", [&](double* seed, auto* out, int* least) {
+      return stock::detail::quarter_pieces(lp, n, at, seed, out, least);
+    });
+    if (cpu_has_avx2()) {
+      check("avx2", [&](double* seed, auto* out, int* least) {
+        return stock::detail::quarter_pieces_avx2(lp, n, at, seed, out, least);
+      });
+    }
+    ++tested;
+    taken += static_cast<int>(want.size());
+  }
+  EXPECT_EQ(tested, 3000);
+  // Every way out of the loop is taken, and pieces are taken.
+  EXPECT_GT(taken, 3000);
+  EXPECT_GT(stopped, 300);
+  EXPECT_GT(by_box, 300);
+  EXPECT_GT(by_plane, 300);
+  EXPECT_GT(unbounded, 100);
+  EXPECT_GT(by_key, 0);
 }
 
 // The box test the cone's loop over a quarter's voxels takes first

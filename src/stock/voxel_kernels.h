@@ -6,6 +6,7 @@
 // The dispatching functions pick the AVX2 one when the CPU has it; the
 // tests hold both to the same bits.
 #include <cstdint>
+#include <utility>
 
 #include "cutsim/core/cpu.h"
 #include "cutsim/sweep/sweep.h"
@@ -75,6 +76,43 @@ std::uint64_t quarter_reach(const float* data, int first, float gamma, double ke
 /// -(c + (gx yx + gy yy + gz yz)) > floor, at the voxel's offset from the
 /// quarter's centre, y = h (x - 1.5, y - 1.5, z - 1.5).
 std::uint64_t overlap_candidates(const float* data, int first, double floor, const CentrePlane* pl, double h);
+/// A leaf's pieces, by field, in the order of their keys: each convex (a
+/// tangent plane at the leaf's centre, key + g . r at an offset r from it)
+/// and none interior-only, for the test of which of them a quarter takes
+/// (quarter_pieces).
+struct LeafPieces {
+  const double* key;                                // bounded key at the leaf's centre, ascending
+  const double *lox, *loy, *loz, *hix, *hiy, *hiz;  // the piece's box
+  const double *gx, *gy, *gz;                       // its plane's gradient at the leaf's centre
+  const double* g1;                                 // |g|_1, as g.cwiseAbs().sum()
+  const double* clip;                               // 1 where 1-Lipschitz (sweep::lipschitz), else 0
+};
+/// A quarter of the leaf, for quarter_pieces.
+struct QuarterAt {
+  double cx, cy, cz;  // its centre
+  double rx, ry, rz;  // the centre's offset from the leaf's
+  double oc;          // |r|
+  double need_max;    // the largest -v among its voxels
+  double hd;          // its half diagonal
+  double hq;          // its half width between voxel centres
+};
+/// The pieces k < n that a quarter takes, in key order: for each, as the
+/// stock update's loop over a leaf's pieces per quarter decides (the loop
+/// ends at the first whose key less oc and hd is at or above need_max;
+/// passed over are a piece whose box is farther than need_max + hd, whose
+/// plane at the centre, dk = key + g . r, less hq |g|_1 is at or above
+/// need_max, or whose bounded key there, dk where dk > 0 or the piece is
+/// 1-Lipschitz and else -inf, less hd is at or above need_max), out[i] =
+/// (bounded key, k) and seed[k] = dk. Returns the count taken, and in
+/// *least the place in `out` of the least (key, k) (0 if none). seed[k] of
+/// pieces passed over may be written too.
+int quarter_pieces(const LeafPieces& f, int n, const QuarterAt& q, double* seed, std::pair<double, std::uint32_t>* out,
+                   int* least);
+int quarter_pieces_scalar(const LeafPieces& f, int from, int n, const QuarterAt& q, double* seed,
+                          std::pair<double, std::uint32_t>* out, int* least);
+int quarter_pieces_avx2(const LeafPieces& f, int n, const QuarterAt& q, double* seed, std::pair<double, std::uint32_t>* out,
+                        int* least);
+
 /// (The dispatching functions take the AVX2 versions where use_avx2(),
 /// cutsim/core/cpu.h.) The two versions, for the tests (the AVX2 ones only
 /// where cpu_has_avx2(); off x86-64 they are the portable ones).
