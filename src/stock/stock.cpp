@@ -1266,9 +1266,9 @@ void Stock::subtract_prims(const std::vector<const sweep::Primitive*>& prims, co
             fields[10][k] = cgrad[k].cwiseAbs().sum();
             fields[11][k] = clip[k] ? 1.0 : 0.0;
           }
-          leaf_pieces = {fields[0].data(), fields[1].data(), fields[2].data(),  fields[3].data(),
-                fields[4].data(), fields[5].data(), fields[6].data(),  fields[7].data(),
-                fields[8].data(), fields[9].data(), fields[10].data(), fields[11].data()};
+          leaf_pieces = {fields[0].data(), fields[1].data(), fields[2].data(), fields[3].data(),
+                         fields[4].data(), fields[5].data(), fields[6].data(), fields[7].data(),
+                         fields[8].data(), fields[9].data(), fields[10].data(), fields[11].data()};
         }
         const bool partial = !m.roi_index.isInside(CoordBBox::createCube(o, kLeafDim));
         float* data = leaf->buffer().data();
